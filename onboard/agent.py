@@ -1,0 +1,348 @@
+"""The onboard agent: serves the robot's devices to a planner over Zenoh.
+
+Threads, and why each exists:
+- Zenoh's callbacks only put queries on a bounded FIFO (nothing blocks inside a callback);
+- the *dispatcher* decodes and checks each command, answers the quick ones (state, info, stop)
+  and hands motions and captures to
+- one *worker per device* (base, pan-tilt, camera), so a stop is served while the base moves and a
+  second motion for a busy device is refused rather than queued;
+- the *publisher* sends odometry and pan/tilt state at a steady rate (latest-only: DROP);
+- the *watchdog* stops the base when the planner goes silent or its liveliness token vanishes.
+
+Safety: the base is stopped at start-up (a Pioneer resumes its last motion when communication
+returns), by the watchdog, and in ``finally`` when the agent ends for any reason.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import msgpack
+import zenoh
+
+from onboard.config import OnboardConfig
+from onboard.devices import Devices
+from shared import messages as m
+from shared.codec import ProtocolError, decode, encode
+from shared.keys import RobotKeys
+
+log = logging.getLogger(__name__)
+
+_REQUEST_TYPES: dict[str, type] = {
+    "move": m.MoveCommand, "stop": m.StopCommand, "look": m.LookCommand,
+    "capture": m.CaptureCommand, "state": m.StateRequest, "info": m.InfoRequest,
+    "sim_truth": m.StateRequest,
+}
+
+
+class CommandRefused(Exception):
+    def __init__(self, code: str, message: str):
+        super().__init__(message)
+        self.code = code
+
+
+class DeviceWorker:
+    """One thread per device; ``try_submit`` refuses a job while the previous one runs."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self._jobs: queue.Queue[Callable[[], None] | None] = queue.Queue(maxsize=1)
+        self._busy = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name=f"worker-{name}", daemon=True)
+        self._thread.start()
+
+    @property
+    def busy(self) -> bool:
+        return self._busy.is_set()
+
+    def try_submit(self, job: Callable[[], None]) -> bool:
+        if self._busy.is_set():
+            return False
+        self._busy.set()
+        self._jobs.put(job)
+        return True
+
+    def close(self) -> None:
+        self._jobs.put(None)
+        self._thread.join(timeout=5.0)
+
+    def _loop(self) -> None:
+        while (job := self._jobs.get()) is not None:
+            try:
+                job()
+            except Exception:  # a device fault must not kill the worker
+                log.exception("%s worker: job failed", self.name)
+            finally:
+                self._busy.clear()
+
+
+@dataclass
+class _PlannerWatch:
+    """When the planner last spoke, and whether its liveliness token is present."""
+
+    last_contact_s: float = 0.0
+    token_lost: bool = False
+
+
+class Agent:
+    def __init__(self, config: OnboardConfig, devices: Devices, session: zenoh.Session, robot_id: str,
+                 sim_truth: Callable[[], m.PoseMsg] | None = None):
+        self.config = config
+        self.devices = devices
+        self.session = session
+        self.keys = RobotKeys(robot_id)
+        self._sim_truth = sim_truth
+        self._commands: queue.Queue[tuple[str, zenoh.Query] | None] = queue.Queue(maxsize=64)
+        self._workers = {name: DeviceWorker(name) for name in ("base", "pantilt", "camera")}
+        self._cancel = {"base": threading.Event(), "pantilt": threading.Event()}
+        self._watch = _PlannerWatch(last_contact_s=time.monotonic())
+        self._shutdown = threading.Event()
+        self._declared: list = []
+        self._threads: list[threading.Thread] = []
+
+    # --- lifecycle -----------------------------------------------------------------------------------
+
+    def run(self, stop: threading.Event) -> None:
+        """Serve until ``stop`` is set; the base is stopped whatever happens."""
+        try:
+            self.devices.base.stop()
+            self._declare()
+            for target in (self._dispatch_loop, self._publish_loop, self._watchdog_loop):
+                thread = threading.Thread(target=target, name=target.__name__.strip("_"), daemon=True)
+                thread.start()
+                self._threads.append(thread)
+            log.info("agent ready: robot %r, backend %s, keys under syt/%s/", self.keys.robot_id,
+                     self.devices.backend, self.keys.robot_id)
+            stop.wait()
+        finally:
+            self._close()
+
+    def _declare(self) -> None:
+        for kind in _REQUEST_TYPES:
+            if kind == "sim_truth" and self._sim_truth is None:
+                continue
+            key = getattr(self.keys, kind)
+            self._declared.append(self.session.declare_queryable(key, self._enqueuer(kind)))
+        self._declared.append(self.session.declare_subscriber(self.keys.heartbeat, self._on_heartbeat))
+        self._declared.append(self.session.liveliness().declare_subscriber(
+            self.keys.any_planner_alive, self._on_planner_liveliness, history=True))
+        self._odometry_pub = self.session.declare_publisher(
+            self.keys.odometry, congestion_control=zenoh.CongestionControl.DROP)
+        self._pantilt_pub = self.session.declare_publisher(
+            self.keys.pantilt, congestion_control=zenoh.CongestionControl.DROP)
+        self._declared += [self._odometry_pub, self._pantilt_pub]
+        self._token = self.session.liveliness().declare_token(self.keys.agent_alive)
+
+    def _close(self) -> None:
+        self._shutdown.set()
+        for cancel in self._cancel.values():
+            cancel.set()
+        try:
+            self.devices.close()
+        finally:
+            self._commands.put(None)
+            for worker in self._workers.values():
+                worker.close()
+            for entity in self._declared + [getattr(self, "_token", None)]:
+                if entity is not None:
+                    entity.undeclare()
+            log.info("agent stopped; base stopped")
+
+    # --- callbacks: never block ----------------------------------------------------------------------
+
+    def _enqueuer(self, kind: str) -> Callable[[zenoh.Query], None]:
+        def enqueue(query: zenoh.Query) -> None:
+            self._watch.last_contact_s = time.monotonic()
+            try:
+                self._commands.put_nowait((kind, query))
+            except queue.Full:
+                self._reply_error(query, "", "busy", "command queue full; the agent is overloaded")
+        return enqueue
+
+    def _on_heartbeat(self, sample: zenoh.Sample) -> None:
+        self._watch.last_contact_s = time.monotonic()
+
+    def _on_planner_liveliness(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            log.warning("planner gone: %s", sample.key_expr)
+            self._watch.token_lost = True
+        else:
+            log.info("planner connected: %s", sample.key_expr)
+            self._watch.token_lost = False
+            self._watch.last_contact_s = time.monotonic()
+
+    # --- dispatcher ----------------------------------------------------------------------------------
+
+    def _dispatch_loop(self) -> None:
+        while (item := self._commands.get()) is not None:
+            kind, query = item
+            payload = query.payload.to_bytes() if query.payload is not None else b""
+            try:
+                command = decode(payload, _REQUEST_TYPES[kind])
+                getattr(self, f"_on_{kind}")(query, command)
+            except ProtocolError as exc:
+                log.warning("%s: malformed command: %s", kind, exc)
+                self._reply_error(query, _guess_command_id(payload), "protocol", str(exc))
+            except CommandRefused as exc:
+                log.warning("%s refused: %s", kind, exc)
+                self._reply_error(query, _guess_command_id(payload), exc.code, str(exc))
+            except Exception as exc:  # a device fault: answer, log, keep serving
+                log.exception("%s failed", kind)
+                self._reply_error(query, _guess_command_id(payload), "device", f"{type(exc).__name__}: {exc}")
+
+    def _submit(self, device: str, query: zenoh.Query, command_id: str, job: Callable[[], object],
+                arrays: str = "raw") -> None:
+        def run() -> None:
+            try:
+                self._reply(query, job(), arrays)
+            except Exception as exc:
+                log.exception("%s job failed", device)
+                self._reply_error(query, command_id, "device", f"{type(exc).__name__}: {exc}")
+        if not self._workers[device].try_submit(run):
+            raise CommandRefused("busy", f"the {device} is executing another command; send stop first")
+
+    def _on_move(self, query: zenoh.Query, cmd: m.MoveCommand) -> None:
+        turn_rad, distance_m = self._resolve_motion(cmd)
+        limits = self.devices.base.limits
+        speed = cmd.speed_m_s if cmd.speed_m_s is not None else limits.default_speed_m_s
+        if speed > limits.max_speed_m_s:
+            raise CommandRefused("limit", f"speed_m_s={speed:g} exceeds the base's max_speed_m_s={limits.max_speed_m_s:g}")
+        cancel = self._fresh_cancel("base")
+        self._watch.token_lost = False  # a loss matters to the motions under way when it happened
+
+        def job() -> m.MoveResult:
+            start = self.devices.clock.now_s()
+            outcome = self.devices.base.move(turn_rad, distance_m, speed, cancel)
+            log.info("move %s: %s after %.2f m", cmd.command_id, outcome.status, outcome.distance_m)
+            return m.MoveResult(cmd.command_id, outcome.status, self._pose(), outcome.distance_m,
+                                outcome.duration_s, max(start, self.devices.clock.now_s()))
+        self._submit("base", query, cmd.command_id, job)
+
+    def _fresh_cancel(self, device: str) -> threading.Event:
+        """A new cancel flag for the device's next job (only when it is free: a busy one is refused)."""
+        if self._workers[device].busy:
+            raise CommandRefused("busy", f"the {device} is executing another command; send stop first")
+        self._cancel[device] = threading.Event()
+        return self._cancel[device]
+
+    def _resolve_motion(self, cmd: m.MoveCommand) -> tuple[float, float]:
+        limits = self.devices.base.limits
+        if cmd.waypoint_m is not None:
+            pose = self.devices.base.reading().pose
+            turn_rad, distance_m = pose.bearing_to(*cmd.waypoint_m), pose.distance_to(*cmd.waypoint_m)
+        else:
+            turn_rad, distance_m = math.radians(cmd.turn_deg), cmd.distance_m
+        if abs(math.degrees(turn_rad)) > limits.max_turn_deg:
+            raise CommandRefused("limit", f"turn_deg={math.degrees(turn_rad):g} exceeds max_turn_deg={limits.max_turn_deg:g}")
+        if abs(distance_m) > limits.max_distance_m:
+            raise CommandRefused("limit", f"distance_m={distance_m:g} exceeds max_distance_m={limits.max_distance_m:g}")
+        return turn_rad, distance_m
+
+    def _on_stop(self, query: zenoh.Query, cmd: m.StopCommand) -> None:
+        self._stop_all("stop command")
+        deadline = time.monotonic() + 2.0
+        while self.devices.base.reading().moving and time.monotonic() < deadline:
+            time.sleep(0.002)
+        self._reply(query, m.StopResult(cmd.command_id, self._pose(), self.devices.clock.now_s()))
+
+    def _on_look(self, query: zenoh.Query, cmd: m.LookCommand) -> None:
+        problem = self.devices.pantilt.limits.check(cmd.pan_deg, cmd.tilt_deg)
+        if problem:
+            raise CommandRefused("limit", problem)
+        cancel = self._fresh_cancel("pantilt")
+
+        def job() -> m.LookResult:
+            duration = self.devices.pantilt.look(math.radians(cmd.pan_deg), math.radians(cmd.tilt_deg), cancel)
+            head = self.devices.pantilt.reading()
+            return m.LookResult(cmd.command_id, math.degrees(head.pan_rad), math.degrees(head.tilt_rad),
+                                duration, self.devices.clock.now_s())
+        self._submit("pantilt", query, cmd.command_id, job)
+
+    def _on_capture(self, query: zenoh.Query, cmd: m.CaptureCommand) -> None:
+        def job() -> m.Capture:
+            camera, head = self.devices.camera, self.devices.pantilt.reading()
+            exposure_s, pose = self.devices.clock.now_s(), self._pose()
+            images = camera.capture()
+            return m.Capture(cmd.command_id, images.left, images.right, pose,
+                             math.degrees(head.pan_rad), math.degrees(head.tilt_rad),
+                             m.IntrinsicsMsg.from_intrinsics(camera.intrinsics),
+                             m.MountMsg.from_mount(camera.mount), exposure_s,
+                             self.devices.clock.now_s() - exposure_s)
+        self._submit("camera", query, cmd.command_id, job, arrays=cmd.encoding)
+
+    def _on_state(self, query: zenoh.Query, cmd: m.StateRequest) -> None:
+        self._reply(query, m.StateReply(cmd.command_id, self.state()))
+
+    def _on_info(self, query: zenoh.Query, cmd: m.InfoRequest) -> None:
+        d = self.devices
+        self._reply(query, m.Info(cmd.command_id, self.keys.robot_id, d.backend, d.base.limits,
+                                  d.pantilt.limits, self.config.timing,
+                                  m.IntrinsicsMsg.from_intrinsics(d.camera.intrinsics),
+                                  m.MountMsg.from_mount(d.camera.mount), self.config.watchdog_ms))
+
+    def _on_sim_truth(self, query: zenoh.Query, cmd: m.StateRequest) -> None:
+        self._reply(query, m.SimTruth(cmd.command_id, self._sim_truth(), self.devices.clock.now_s()))
+
+    # --- state, publishing, watchdog -----------------------------------------------------------------
+
+    def _pose(self) -> m.PoseMsg:
+        return m.PoseMsg.from_pose(self.devices.base.reading().pose)
+
+    def state(self) -> m.RobotState:
+        base, head = self.devices.base.reading(), self.devices.pantilt.reading()
+        return m.RobotState(m.PoseMsg.from_pose(base.pose), base.speed_m_s, math.degrees(base.turn_rate_rad_s),
+                            math.degrees(head.pan_rad), math.degrees(head.tilt_rad), base.moving,
+                            head.moving, base.stalled, self.devices.clock.now_s())
+
+    def _publish_loop(self) -> None:
+        period, seq = 1.0 / self.config.publish_hz, 0
+        while not self._shutdown.wait(period):
+            s = self.state()
+            self._odometry_pub.put(encode(m.Odometry(seq, s.pose, s.speed_m_s, s.turn_rate_deg_s,
+                                                     s.base_moving, s.stalled, s.robot_time_s)))
+            self._pantilt_pub.put(encode(m.PanTiltState(seq, s.pan_deg, s.tilt_deg, s.pantilt_moving,
+                                                        s.robot_time_s)))
+            seq += 1
+
+    def _watchdog_loop(self) -> None:
+        timeout_s = self.config.watchdog_ms / 1000.0
+        while not self._shutdown.wait(0.02):
+            if not self.devices.base.reading().moving:
+                continue
+            silent_s = time.monotonic() - self._watch.last_contact_s
+            if self._watch.token_lost:
+                self._stop_all("planner lost (liveliness token gone)")
+            elif silent_s > timeout_s:
+                self._stop_all(f"watchdog: no word from the planner for {silent_s * 1000:.0f} ms")
+
+    def _stop_all(self, why: str) -> None:
+        log.warning("stopping the base: %s", why)
+        for cancel in self._cancel.values():
+            cancel.set()
+        self.devices.base.stop()
+        self.devices.pantilt.halt()
+
+    # --- replies -------------------------------------------------------------------------------------
+
+    def _reply(self, query: zenoh.Query, message: object, arrays: str = "raw") -> None:
+        query.reply(query.key_expr, encode(message, arrays))
+        query.drop()
+
+    def _reply_error(self, query: zenoh.Query, command_id: str, code: str, text: str) -> None:
+        query.reply_err(encode(m.ErrorReply(command_id, code, text)))
+        query.drop()
+
+
+def _guess_command_id(payload: bytes) -> str:
+    """Echo the command id of a malformed command when one can be read."""
+    try:
+        command_id = msgpack.unpackb(payload, raw=False)["body"]["command_id"]
+    except Exception:
+        return ""
+    return command_id if isinstance(command_id, str) and len(command_id) <= 64 else ""

@@ -1,0 +1,161 @@
+"""``syt-onboard``: the agent on the robot, plus ``render`` (a world preview) and ``bench``.
+
+    syt-onboard --backend sim --world paper-lab [--start X,Y,HEADING_DEG] [--target X,Y,Z,YAW_DEG]
+    syt-onboard render --world FILE [--start ..] [--pan DEG] [--tilt DEG] --out DIR
+    syt-onboard bench --json
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import signal
+import sys
+import threading
+from pathlib import Path
+
+from onboard.config import OnboardConfig
+from shared.config import ConfigError, load_config
+from shared.transport import add_transport_args, transport_from_args
+
+log = logging.getLogger("syt.onboard")
+
+
+def _floats(count: int, what: str):
+    def parse(text: str) -> tuple[float, ...]:
+        try:
+            values = tuple(float(v) for v in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what}: expected {count} comma-separated numbers, got {text!r}") from None
+        if len(values) != count or not all(math.isfinite(v) for v in values):
+            raise argparse.ArgumentTypeError(f"{what}: expected {count} finite comma-separated numbers, got {text!r}")
+        return values
+    return parse
+
+
+def _add_world_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--world", help="bundled world name or world file (default: the config's, paper-lab)")
+    parser.add_argument("--start", type=_floats(3, "--start"), metavar="X,Y,HEADING_DEG",
+                        help="override the world's robot start")
+    parser.add_argument("--target", type=_floats(4, "--target"), metavar="X,Y,Z,YAW_DEG",
+                        help="override the world's target placement (bottom centre)")
+
+
+def _load_world(args: argparse.Namespace, config: OnboardConfig):
+    from onboard.sim.world import load_world
+
+    world = load_world(args.world or config.sim.world, robot_radius_m=config.base.radius_m)
+    if args.start is not None:
+        x, y, heading = args.start
+        world = world.with_start(x, y, math.radians(heading))
+    if args.target is not None:
+        world = world.with_target(*args.target)
+    return world
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="syt-onboard", description="The onboard agent of a syt robot.")
+    parser.add_argument("--config", type=Path, metavar="FILE.toml", help="onboard configuration")
+    parser.add_argument("--backend", choices=("sim",), help="device backend (default: the config's, sim)")
+    parser.add_argument("--realtime", action="store_true", help="simulator: pace the clock like the real robot")
+    parser.add_argument("--seed", type=int, help="simulator: odometry-noise seed")
+    parser.add_argument("-v", "--verbose", action="store_true")
+    _add_world_args(parser)
+    add_transport_args(parser)
+    return parser
+
+
+def _overrides(args: argparse.Namespace) -> dict:
+    pairs = {"backend": args.backend, "sim.world": args.world,
+             "sim.realtime": True if args.realtime else None, "sim.seed": args.seed}
+    return {k: v for k, v in pairs.items() if v is not None}
+
+
+def run_agent(argv: list[str]) -> int:
+    args = _parser().parse_args(argv)
+    _setup_logging(args.verbose)
+    from onboard.sim.world import WorldError
+
+    try:
+        config = load_config(OnboardConfig, args.config, _overrides(args))
+        transport = transport_from_args(args)
+        world = _load_world(args, config)
+    except (ConfigError, WorldError, ValueError, FileNotFoundError) as exc:
+        log.error("%s", exc)
+        return 2
+    from onboard.agent import Agent
+    from onboard.sim.robot import build_sim_devices
+    from shared.messages import PoseMsg
+
+    devices = build_sim_devices(config, world)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    session = transport.open()
+    try:
+        agent = Agent(config, devices, session, transport.robot_id,
+                      sim_truth=lambda: PoseMsg.from_pose(devices.base.true_pose))
+        agent.run(stop)
+    finally:
+        session.close()
+    return 0
+
+
+def run_render(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="syt-onboard render", description="Render a world's stereo view.")
+    _add_world_args(parser)
+    parser.add_argument("--config", type=Path, metavar="FILE.toml")
+    parser.add_argument("--pan", type=float, default=0.0, metavar="DEG")
+    parser.add_argument("--tilt", type=float, default=0.0, metavar="DEG")
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR")
+    args = parser.parse_args(argv)
+    _setup_logging(False)
+    from onboard.sim.preview import write_preview
+    from onboard.sim.world import WorldError
+
+    try:
+        config = load_config(OnboardConfig, args.config)
+        world = _load_world(args, config)
+        problem = config.pantilt.check(args.pan, args.tilt)
+        if problem:
+            raise ValueError(problem)
+    except (ConfigError, WorldError, ValueError) as exc:
+        log.error("%s", exc)
+        return 2
+    paths = write_preview(world, world.start, math.radians(args.pan), math.radians(args.tilt), args.out,
+                          config.camera.intrinsics(), config.camera.mount())
+    for path in paths:
+        sys.stdout.write(f"{path}\n")
+    return 0
+
+
+def run_bench(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="syt-onboard bench", description="Measure the onboard side.")
+    parser.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")
+    parser.add_argument("--repeats", type=int, default=30)
+    args = parser.parse_args(argv)
+    _setup_logging(False)
+    from onboard.bench import run
+
+    sys.stdout.write(run(args.repeats) + "\n")
+    return 0
+
+
+_COMMANDS = {"render": run_render, "bench": run_bench}
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] in _COMMANDS:
+        return _COMMANDS[argv[0]](argv[1:])
+    return run_agent(argv)
+
+
+def _setup_logging(verbose: bool) -> None:
+    logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

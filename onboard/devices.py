@@ -1,0 +1,106 @@
+"""One interface per device, shared by every backend (simulator today, serial hardware next).
+
+The agent talks only to these protocols, so the planner never knows which backend answers it.
+Angles are radians here; the wire (degrees) is the agent's business.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import numpy as np
+
+from shared.geometry import HeadMount, Intrinsics, Pose2D
+from shared.limits import BaseLimits, PanTiltLimits
+
+
+@dataclass(frozen=True)
+class MotionOutcome:
+    status: Literal["done", "stalled", "stopped"]
+    distance_m: float  # distance actually driven
+    duration_s: float  # robot time the motion took
+
+
+@dataclass(frozen=True)
+class BaseReading:
+    pose: Pose2D  # odometry: what the robot believes, not the truth
+    speed_m_s: float
+    turn_rate_rad_s: float
+    moving: bool
+    stalled: bool
+
+
+@dataclass(frozen=True)
+class PanTiltReading:
+    pan_rad: float
+    tilt_rad: float
+    moving: bool
+
+
+@dataclass(frozen=True)
+class StereoImages:
+    left: np.ndarray  # H×W×3 uint8 RGB, rectified
+    right: np.ndarray
+
+
+class Clock(Protocol):
+    """The robot's clock. The simulator's runs as fast as the machine allows unless paced."""
+
+    def now_s(self) -> float: ...
+
+
+class Base(Protocol):
+    limits: BaseLimits
+
+    def move(self, turn_rad: float, distance_m: float, speed_m_s: float,
+             cancel: threading.Event) -> MotionOutcome:
+        """Turn in place, then drive straight; block until done, stalled or ``cancel`` is set."""
+
+    def stop(self) -> None:
+        """Stop at once; safe to call from any thread, at any time, repeatedly."""
+
+    def reading(self) -> BaseReading: ...
+
+    def close(self) -> None:
+        """Stop and release the device."""
+
+
+class PanTilt(Protocol):
+    limits: PanTiltLimits
+
+    def look(self, pan_rad: float, tilt_rad: float, cancel: threading.Event) -> float:
+        """Slew to an absolute setting (already checked against the limits); return the time taken."""
+
+    def halt(self) -> None: ...
+
+    def reading(self) -> PanTiltReading: ...
+
+    def close(self) -> None: ...
+
+
+class StereoCamera(Protocol):
+    intrinsics: Intrinsics
+    mount: HeadMount
+
+    def capture(self) -> StereoImages:
+        """One synchronised, rectified pair."""
+
+    def close(self) -> None: ...
+
+
+@dataclass
+class Devices:
+    """The robot as the agent sees it."""
+
+    backend: str
+    clock: Clock
+    base: Base
+    pantilt: PanTilt
+    camera: StereoCamera
+
+    def close(self) -> None:
+        """Base first: a moving robot is the only dangerous thing here."""
+        for device in (self.base, self.pantilt, self.camera):
+            device.close()

@@ -1,0 +1,72 @@
+"""Start an onboard agent as a separate process on a loopback port, and stop it cleanly.
+
+Used by the demo, the benchmarks, the experiments and the tests: the agent is a real ``syt-onboard`` process,
+talking to this one over real Zenoh, exactly as on two machines.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+from shared.keys import RobotKeys
+
+log = logging.getLogger(__name__)
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@dataclass(frozen=True)
+class LoopbackAgent:
+    endpoint: str  # what the planner passes to --connect
+    process: subprocess.Popen
+    log_path: Path | None
+
+    def wait_ready(self, session: zenoh.Session, robot_id: str, timeout_s: float = 60.0) -> None:
+        """Wait for the agent's liveliness token; fail at once, with its log, if the process died."""
+        key = RobotKeys(robot_id).agent_alive
+        deadline = time.monotonic() + timeout_s
+        while not any(r.ok is not None for r in session.liveliness().get(key, timeout=0.5)):
+            if self.process.poll() is not None:
+                tail = self.log_path.read_text()[-2000:] if self.log_path else "(no log kept)"
+                raise RuntimeError(f"the onboard agent exited with {self.process.returncode}:\n{tail}")
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the onboard agent did not come up within {timeout_s:g} s")
+            time.sleep(0.05)
+
+
+@contextlib.contextmanager
+def onboard_agent(agent_args: list[str], log_path: Path | None = None) -> Iterator[LoopbackAgent]:
+    """Run ``syt-onboard <agent_args>`` listening on a fresh loopback port, scouting off."""
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    cmd = [sys.executable, "-m", "onboard.cli", *agent_args, "--listen", endpoint, "--no-multicast-scouting"]
+    log.info("starting the onboard agent: %s", " ".join(cmd[2:]))
+    stderr = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115 - closed below
+    process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=stderr)
+    try:
+        yield LoopbackAgent(endpoint, process, log_path)
+    finally:
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+        if log_path:
+            stderr.close()
+        log.info("onboard agent exited with %s", process.returncode)

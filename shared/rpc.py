@@ -1,0 +1,40 @@
+"""One request/reply exchange over a Zenoh query, with the reply decoded and checked."""
+
+from __future__ import annotations
+
+from typing import Any, TypeVar
+
+import zenoh
+
+from shared.codec import ProtocolError, decode, encode
+from shared.messages import ErrorReply
+
+T = TypeVar("T")
+
+
+class CommandError(RuntimeError):
+    """The robot answered with an ErrorReply (``code``: protocol, limit, busy or device)."""
+
+    def __init__(self, key: str, reply: ErrorReply):
+        super().__init__(f"{key}: {reply.code}: {reply.message}")
+        self.code = reply.code
+        self.reply = reply
+
+
+class RobotUnavailable(RuntimeError):
+    """Nobody answered in time: the agent is not running, unreachable or stuck."""
+
+
+def request(session: zenoh.Session, key: str, command: Any, expected: type[T], timeout_s: float) -> T:
+    """Send ``command`` to the queryable at ``key``; return its decoded reply or raise."""
+    replies = session.get(key, payload=encode(command), timeout=timeout_s)
+    for reply in replies:
+        if reply.ok is not None:
+            result = decode(reply.ok.payload.to_bytes(), expected)
+            echoed = getattr(result, "command_id", None)
+            if echoed is not None and echoed != command.command_id:
+                raise ProtocolError("command_id", echoed, f"reply does not echo {command.command_id!r}")
+            return result
+        raise CommandError(key, decode(reply.err.payload.to_bytes(), ErrorReply))
+    raise RobotUnavailable(f"no reply from {key} within {timeout_s:g} s: is the onboard agent running "
+                           "and reachable (--connect/--listen)?")

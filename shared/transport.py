@@ -1,0 +1,95 @@
+"""Zenoh transport options shared by both programs, parsed by one helper.
+
+Both ``syt-onboard`` and ``syt-offboard`` take ``--robot ID``, ``--connect ENDPOINT``,
+``--listen ENDPOINT``, ``--zenoh-config FILE.json5``, ``--mode peer|client`` and
+``--no-multicast-scouting``. Peer mode is the default: two processes talk directly, no router.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import zenoh
+
+from shared.keys import check_robot_id
+
+log = logging.getLogger(__name__)
+
+# A frozen or unplugged peer is declared gone after this lease (Zenoh's default is 10 s): the robot
+# must notice a lost planner quickly, since its watchdog acts on the liveliness token.
+DEFAULT_LEASE_MS = 2000
+
+
+@dataclass(frozen=True)
+class TransportConfig:
+    robot_id: str = "syt"
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    zenoh_config: Path | None = None
+    mode: Literal["peer", "client"] = "peer"
+    multicast_scouting: bool = True
+    lease_ms: int = DEFAULT_LEASE_MS
+    extra: dict = field(default_factory=dict)  # further "key/path": json-value overrides
+
+    def __post_init__(self) -> None:
+        check_robot_id(self.robot_id)
+
+    def zenoh(self) -> zenoh.Config:
+        """The Zenoh configuration: the file first, then what the flags say on top."""
+        if self.zenoh_config is not None:
+            if not self.zenoh_config.is_file():
+                raise FileNotFoundError(f"--zenoh-config: no such file {self.zenoh_config}")
+            config = zenoh.Config.from_file(str(self.zenoh_config))
+        else:
+            config = zenoh.Config()
+        settings = {
+            "mode": self.mode,
+            "scouting/multicast/enabled": self.multicast_scouting,
+            "transport/link/tx/lease": self.lease_ms,
+            **self.extra,
+        }
+        if self.connect:
+            settings["connect/endpoints"] = list(self.connect)
+        if self.listen:
+            settings["listen/endpoints"] = list(self.listen)
+        for key, value in settings.items():
+            config.insert_json5(key, json.dumps(value))
+        return config
+
+    def open(self) -> zenoh.Session:
+        log.info("opening Zenoh session: mode=%s connect=%s listen=%s scouting=%s",
+                 self.mode, list(self.connect), list(self.listen), self.multicast_scouting)
+        return zenoh.open(self.zenoh())
+
+
+def add_transport_args(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("transport (Zenoh)")
+    group.add_argument("--robot", default="syt", metavar="ID", help="robot id: keys live under syt/<ID>/ (default: syt)")
+    group.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                       help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable)")
+    group.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
+                       help="endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
+    group.add_argument("--zenoh-config", type=Path, metavar="FILE.json5",
+                       help="a Zenoh configuration file (TLS, access control ...); flags override it")
+    group.add_argument("--mode", choices=("peer", "client"), default="peer", help="Zenoh mode (default: peer)")
+    group.add_argument("--no-multicast-scouting", action="store_true",
+                       help="do not discover peers by multicast (use with --connect/--listen)")
+    group.add_argument("--lease-ms", type=int, default=DEFAULT_LEASE_MS,
+                       help=f"link lease: a silent peer is dropped after this (default: {DEFAULT_LEASE_MS})")
+
+
+def transport_from_args(args: argparse.Namespace) -> TransportConfig:
+    return TransportConfig(
+        robot_id=args.robot,
+        connect=tuple(args.connect),
+        listen=tuple(args.listen),
+        zenoh_config=args.zenoh_config,
+        mode=args.mode,
+        multicast_scouting=not args.no_multicast_scouting,
+        lease_ms=args.lease_ms,
+    )

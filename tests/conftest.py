@@ -1,0 +1,64 @@
+"""Shared fixtures: real onboard agents in subprocesses, real Zenoh sessions on loopback."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from shared.launch import LoopbackAgent, onboard_agent
+from offboard.robot_client import RobotClient
+from shared.transport import TransportConfig
+
+
+def client_transport(agent: LoopbackAgent, robot_id: str = "syt") -> TransportConfig:
+    return TransportConfig(robot_id=robot_id, connect=(agent.endpoint,), multicast_scouting=False)
+
+
+@contextlib.contextmanager
+def running_agent(tmp_path: Path, *args: str) -> Iterator[tuple[LoopbackAgent, RobotClient]]:
+    """An agent subprocess plus a connected client; the agent's log is kept for assertions."""
+    log_path = tmp_path / "onboard.log"
+    with onboard_agent(["--backend", "sim", *args], log_path) as agent:
+        transport = client_transport(agent)
+        with transport.open() as session, RobotClient(session, transport.robot_id) as robot:
+            agent.wait_ready(session, transport.robot_id)
+            robot.wait_for_robot()
+            yield agent, robot
+
+
+BOX_WORLD = """
+name = "box-room"
+[room]
+size = [6.0, 4.0, 2.5]
+[[obstacle]]
+name = "crate"
+kind = "crate"
+min = [2.5, 2.5, 0.0]
+max = [3.5, 4.0, 0.8]
+[target]
+picture = "target"
+size = [0.23, 0.23, 0.23]
+position = [3.0, 3.2, 0.8]
+yaw_deg = -90
+[robot]
+start = [1.5, 1.5]
+heading_deg = 0
+"""
+
+
+@pytest.fixture
+def box_world(tmp_path) -> Path:
+    """A 6 × 4 m room with one crate (x 2.5-3.5, y 2.5-4) that tests can reason about exactly."""
+    path = tmp_path / "box-room.toml"
+    path.write_text(BOX_WORLD)
+    return path
+
+
+@pytest.fixture(scope="module")
+def sim_agent(tmp_path_factory) -> Iterator[tuple[LoopbackAgent, RobotClient]]:
+    """One fast-clock paper-lab agent shared by a module's tests."""
+    with running_agent(tmp_path_factory.mktemp("agent"), "--world", "paper-lab") as pair:
+        yield pair

@@ -1,0 +1,137 @@
+"""The wire contract: every message round-trips, and every kind of bad payload is one ProtocolError."""
+
+import math
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from shared import messages as m
+from shared.codec import ProtocolError, decode, encode
+from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
+
+POSE = m.PoseMsg(1.5, 2.0, 90.0)
+INTR = m.IntrinsicsMsg(8, 6, 5.0, 5.0, 3.5, 2.5)
+MOUNT = m.MountMsg(1.2, 0.0, 0.12)
+
+
+def _image(seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 256, (6, 8, 3), dtype=np.uint8)
+
+
+EXAMPLES = [
+    m.MoveCommand("c1", turn_deg=90.0, distance_m=1.0),
+    m.MoveCommand("c2", waypoint_m=(3.0, 4.0), speed_m_s=0.3),
+    m.StopCommand("c3"), m.LookCommand("c4", -30.0, 15.0), m.CaptureCommand("c5", "png"),
+    m.StateRequest("c6"), m.InfoRequest("c7"),
+    m.ErrorReply("c8", "limit", "pan too far"),
+    m.MoveResult("c9", "stalled", POSE, 0.4, 1.2, 10.0),
+    m.StopResult("c10", POSE, 3.0), m.LookResult("c11", 10.0, 0.0, 0.5, 4.0),
+    m.Capture("c12", _image(0), _image(1), POSE, 0.0, 30.0, INTR, MOUNT, 5.0, 0.1),
+    m.RobotState(POSE, 0.1, 0.0, 0.0, 0.0, True, False, False, 1.0),
+    m.StateReply("c13", m.RobotState(POSE, 0.0, 0.0, 5.0, 5.0, False, False, True, 2.0)),
+    m.Odometry(3, POSE, 0.2, 10.0, True, False, 1.0), m.PanTiltState(4, 1.0, 2.0, False, 1.0),
+    m.Info("c14", "syt", "sim", BaseLimits(), PanTiltLimits(), CameraTiming(), INTR, MOUNT, 1000),
+    m.Heartbeat("planner-1", 7), m.SimTruth("c15", POSE, 1.0),
+]
+
+
+def _equal(a, b) -> bool:
+    if isinstance(a, np.ndarray):
+        return isinstance(b, np.ndarray) and a.dtype == b.dtype and np.array_equal(a, b)
+    if hasattr(a, "__dataclass_fields__"):
+        return type(a) is type(b) and all(_equal(getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
+    return a == b
+
+
+def test_every_message_type_has_an_example():
+    assert {type(e).__name__ for e in EXAMPLES} == set(m.MESSAGE_TYPES)
+
+
+@pytest.mark.parametrize("message", EXAMPLES, ids=lambda e: type(e).__name__)
+@pytest.mark.parametrize("arrays", ["raw", "png"])
+def test_round_trip(message, arrays):
+    assert _equal(decode(encode(message, arrays), type(message)), message)
+
+
+def test_arrays_travel_as_bytes_with_a_header_not_as_lists():
+    capture = EXAMPLES[11]
+    body = msgpack.unpackb(encode(capture, "png"))["body"]
+    assert body["left"]["encoding"] == "png" and isinstance(body["left"]["data"], bytes)
+    assert body["left"]["shape"] == [6, 8, 3] and body["left"]["dtype"] == "uint8"
+    assert msgpack.unpackb(encode(capture))["body"]["right"]["encoding"] == "raw"
+
+
+def _payload(type_name: str, body: dict, schema: int = m.SCHEMA_VERSION) -> bytes:
+    return msgpack.packb({"schema": schema, "type": type_name, "body": body}, use_bin_type=True)
+
+
+LOOK = {"command_id": "x", "pan_deg": 10.0, "tilt_deg": 0.0}
+BAD = [
+    ("not msgpack", b"\xc1\xff\x00garbage", ""),
+    ("not a map", msgpack.packb([1, 2]), ""),
+    ("old schema", _payload("LookCommand", LOOK, schema=0), "schema"),
+    ("unknown type", _payload("FlyCommand", LOOK), "type"),
+    ("unknown field", _payload("LookCommand", {**LOOK, "zoom": 2.0}), "zoom"),
+    ("missing field", _payload("LookCommand", {"command_id": "x", "pan_deg": 1.0}), "tilt_deg"),
+    ("wrong type", _payload("LookCommand", {**LOOK, "pan_deg": "ten"}), "pan_deg"),
+    ("bool for number", _payload("LookCommand", {**LOOK, "pan_deg": True}), "pan_deg"),
+    ("NaN", _payload("LookCommand", {**LOOK, "tilt_deg": math.nan}), "tilt_deg"),
+    ("infinity", _payload("LookCommand", {**LOOK, "tilt_deg": math.inf}), "tilt_deg"),
+    ("out of range", _payload("LookCommand", {**LOOK, "tilt_deg": 500.0}), "tilt_deg"),
+    ("bad literal", _payload("CaptureCommand", {"command_id": "x", "encoding": "jpeg"}), "encoding"),
+    ("tuple length", _payload("MoveCommand", {"command_id": "x", "waypoint_m": [1.0]}), "waypoint_m"),
+    ("nested", _payload("MoveResult", {"command_id": "x", "status": "done", "pose": {"x_m": 1.0, "y_m": 2.0},
+                                       "distance_m": 0.0, "duration_s": 0.0, "robot_time_s": 0.0}), "pose.heading_deg"),
+]
+
+
+@pytest.mark.parametrize("name,payload,field", BAD, ids=[b[0] for b in BAD])
+def test_bad_payloads_raise_one_protocol_error_naming_the_field(name, payload, field):
+    with pytest.raises(ProtocolError) as err:
+        decode(payload, m.LookCommand, m.CaptureCommand, m.MoveCommand, m.MoveResult)
+    assert err.value.field.startswith(field)
+    assert field in str(err.value)
+
+
+def test_a_command_id_must_not_be_empty():
+    with pytest.raises(ProtocolError, match="command_id must have 1 to 64 characters"):
+        decode(_payload("LookCommand", {**LOOK, "command_id": ""}), m.LookCommand)
+
+
+def _capture_body(**left_changes) -> bytes:
+    body = msgpack.unpackb(encode(EXAMPLES[11]))["body"]
+    body["left"].update(left_changes)
+    return _payload("Capture", body)
+
+
+@pytest.mark.parametrize("change", [
+    {"data": b"short"}, {"dtype": "complex128"}, {"shape": [6, -8, 3]}, {"encoding": "jpeg"},
+    {"encoding": "png"},  # raw bytes labelled as PNG
+    {"shape": [6, 8, 4], "data": bytes(6 * 8 * 4)},  # not RGB: refused by the message's own check
+])
+def test_bad_arrays_are_refused(change):
+    with pytest.raises(ProtocolError) as err:
+        decode(_capture_body(**change), m.Capture)
+    assert err.value.field.startswith("left") or "left" in str(err.value)
+
+
+def test_expected_type_is_enforced():
+    with pytest.raises(ProtocolError, match="expected LookResult"):
+        decode(encode(m.StopCommand("s")), m.LookResult)
+
+
+@given(st.binary(max_size=200))
+def test_random_bytes_never_escape_as_anything_but_protocol_error(data):
+    try:
+        decode(data)
+    except ProtocolError:
+        pass
+
+
+@given(pan=st.floats(-360, 360), tilt=st.floats(-90, 90), cid=st.text(min_size=1, max_size=64))
+def test_look_commands_round_trip(pan, tilt, cid):
+    cmd = m.LookCommand(cid, pan, tilt)
+    assert decode(encode(cmd), m.LookCommand) == cmd
