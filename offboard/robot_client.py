@@ -101,6 +101,11 @@ class RobotClient:
         """Simulator only (tests and benchmarks): the true pose, which a planner must never use."""
         return self._request(self.keys.sim_truth, m.StateRequest(self._next_id()), m.SimTruth, 5.0).pose
 
+    def sim_teleport(self, x_m: float, y_m: float, heading_deg: float) -> m.PoseMsg:
+        """Simulator only (calibration and tests): put the robot at a pose, truth and odometry."""
+        cmd = m.SimTeleport(self._next_id(), m.PoseMsg(x_m, y_m, heading_deg))
+        return self._request(self.keys.sim_teleport, cmd, m.SimTruth, 5.0).pose
+
     def latest_odometry(self, timeout_s: float = 2.0) -> m.Odometry:
         """The next odometry publication (a steady stream; only the newest matters)."""
         with self.session.declare_subscriber(self.keys.odometry, zenoh.handlers.RingChannel(1)) as sub:

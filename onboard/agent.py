@@ -27,7 +27,7 @@ import msgpack
 import zenoh
 
 from onboard.config import OnboardConfig
-from onboard.devices import Devices
+from onboard.devices import Devices, SimControl
 from shared import messages as m
 from shared.codec import ProtocolError, decode, encode
 from shared.keys import RobotKeys
@@ -37,8 +37,9 @@ log = logging.getLogger(__name__)
 _REQUEST_TYPES: dict[str, type] = {
     "move": m.MoveCommand, "stop": m.StopCommand, "look": m.LookCommand,
     "capture": m.CaptureCommand, "state": m.StateRequest, "info": m.InfoRequest,
-    "sim_truth": m.StateRequest,
+    "sim_truth": m.StateRequest, "sim_teleport": m.SimTeleport,
 }
+_SIM_ONLY = ("sim_truth", "sim_teleport")
 
 
 class CommandRefused(Exception):
@@ -92,12 +93,12 @@ class _PlannerWatch:
 
 class Agent:
     def __init__(self, config: OnboardConfig, devices: Devices, session: zenoh.Session, robot_id: str,
-                 sim_truth: Callable[[], m.PoseMsg] | None = None):
+                 sim: SimControl | None = None):
         self.config = config
         self.devices = devices
         self.session = session
         self.keys = RobotKeys(robot_id)
-        self._sim_truth = sim_truth
+        self._sim = sim
         self._commands: queue.Queue[tuple[str, zenoh.Query] | None] = queue.Queue(maxsize=64)
         self._workers = {name: DeviceWorker(name) for name in ("base", "pantilt", "camera")}
         self._cancel = {"base": threading.Event(), "pantilt": threading.Event()}
@@ -125,7 +126,7 @@ class Agent:
 
     def _declare(self) -> None:
         for kind in _REQUEST_TYPES:
-            if kind == "sim_truth" and self._sim_truth is None:
+            if kind in _SIM_ONLY and self._sim is None:
                 continue
             key = getattr(self.keys, kind)
             self._declared.append(self.session.declare_queryable(key, self._enqueuer(kind)))
@@ -287,7 +288,16 @@ class Agent:
                                   m.MountMsg.from_mount(d.camera.mount), self.config.watchdog_ms))
 
     def _on_sim_truth(self, query: zenoh.Query, cmd: m.StateRequest) -> None:
-        self._reply(query, m.SimTruth(cmd.command_id, self._sim_truth(), self.devices.clock.now_s()))
+        self._reply(query, m.SimTruth(cmd.command_id, m.PoseMsg.from_pose(self._sim.true_pose),
+                                      self.devices.clock.now_s()))
+
+    def _on_sim_teleport(self, query: zenoh.Query, cmd: m.SimTeleport) -> None:
+        if self._workers["base"].busy:
+            raise CommandRefused("busy", "cannot teleport while the base moves")
+        problem = self._sim.teleport(cmd.pose.to_pose())
+        if problem:
+            raise CommandRefused("limit", problem)
+        self._on_sim_truth(query, m.StateRequest(cmd.command_id))
 
     # --- state, publishing, watchdog -----------------------------------------------------------------
 

@@ -86,7 +86,6 @@ def run_agent(argv: list[str]) -> int:
         return 2
     from onboard.agent import Agent
     from onboard.sim.robot import build_sim_devices
-    from shared.messages import PoseMsg
 
     devices = build_sim_devices(config, world)
     stop = threading.Event()
@@ -94,8 +93,7 @@ def run_agent(argv: list[str]) -> int:
         signal.signal(sig, lambda *_: stop.set())
     session = transport.open()
     try:
-        agent = Agent(config, devices, session, transport.robot_id,
-                      sim_truth=lambda: PoseMsg.from_pose(devices.base.true_pose))
+        agent = Agent(config, devices, session, transport.robot_id, sim=devices.base)
         agent.run(stop)
     finally:
         session.close()

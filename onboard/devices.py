@@ -90,6 +90,16 @@ class StereoCamera(Protocol):
     def close(self) -> None: ...
 
 
+class SimControl(Protocol):
+    """What only a simulator can do, for tests, benchmarks and detector calibration."""
+
+    @property
+    def true_pose(self) -> Pose2D: ...
+
+    def teleport(self, pose: Pose2D) -> str | None:
+        """Put the robot at ``pose`` (truth and odometry); the reason if it cannot stand there."""
+
+
 @dataclass
 class Devices:
     """The robot as the agent sees it."""

@@ -9,6 +9,7 @@
 | ``syt/<id>/state``           | queryable   | StateRequest → StateReply            |
 | ``syt/<id>/info``            | queryable   | InfoRequest → Info                   |
 | ``syt/<id>/sim/truth``       | queryable   | StateRequest → SimTruth (simulator)  |
+| ``syt/<id>/sim/teleport``    | queryable   | SimTeleport → SimTruth (simulator)   |
 | ``syt/<id>/odometry``        | publication | Odometry, steady rate, latest-only   |
 | ``syt/<id>/pantilt``         | publication | PanTiltState, steady rate            |
 | ``syt/<id>/heartbeat``       | publication | Heartbeat, from the planner          |
@@ -70,6 +71,10 @@ class RobotKeys:
     @property
     def sim_truth(self) -> str:
         return self._key("sim/truth")
+
+    @property
+    def sim_teleport(self) -> str:
+        return self._key("sim/teleport")
 
     @property
     def odometry(self) -> str:

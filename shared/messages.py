@@ -286,8 +286,19 @@ class SimTruth:
     robot_time_s: float = field(metadata=_TIME)
 
 
+@dataclass(frozen=True)
+class SimTeleport:
+    """Simulator only, for calibration and tests: put the robot at a pose (truth and odometry)."""
+
+    command_id: str
+    pose: PoseMsg
+
+    def __post_init__(self) -> None:
+        _check_id(self.command_id)
+
+
 MESSAGE_TYPES: dict[str, type] = {cls.__name__: cls for cls in (
     MoveCommand, StopCommand, LookCommand, CaptureCommand, StateRequest, InfoRequest,
     ErrorReply, MoveResult, StopResult, LookResult, Capture, RobotState, StateReply, Odometry,
-    PanTiltState, Info, Heartbeat, SimTruth,
+    PanTiltState, Info, Heartbeat, SimTruth, SimTeleport,
 )}

@@ -163,6 +163,15 @@ def test_driving_into_an_obstacle_stalls_at_its_side(tmp_path, box_world):
         assert robot.sim_truth().y_m == pytest.approx(2.5 - robot.info().base.radius_m, abs=0.005)
 
 
+def test_teleport_places_the_robot_and_refuses_walls(sim_agent):
+    _, robot = sim_agent
+    pose = robot.sim_teleport(2.0, 1.0, 45.0)
+    assert (pose.x_m, pose.y_m, pose.heading_deg) == pytest.approx((2.0, 1.0, 45.0))
+    assert robot.state().pose == pose  # odometry is reset with the truth
+    with pytest.raises(CommandError, match="cannot stand"):
+        robot.sim_teleport(0.1, 0.1, 0.0)
+
+
 PACED = ("--start", "0.5,1.0,0", "--realtime")
 
 

@@ -34,7 +34,7 @@ EXAMPLES = [
     m.StateReply("c13", m.RobotState(POSE, 0.0, 0.0, 5.0, 5.0, False, False, True, 2.0)),
     m.Odometry(3, POSE, 0.2, 10.0, True, False, 1.0), m.PanTiltState(4, 1.0, 2.0, False, 1.0),
     m.Info("c14", "syt", "sim", BaseLimits(), PanTiltLimits(), CameraTiming(), INTR, MOUNT, 1000),
-    m.Heartbeat("planner-1", 7), m.SimTruth("c15", POSE, 1.0),
+    m.Heartbeat("planner-1", 7), m.SimTruth("c15", POSE, 1.0), m.SimTeleport("c16", POSE),
 ]
 
 

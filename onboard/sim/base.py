@@ -114,6 +114,14 @@ class SimBase:
         with self._lock:
             return self._truth
 
+    def teleport(self, pose: Pose2D) -> str | None:
+        if self.collides(pose.x_m, pose.y_m):
+            return f"the robot cannot stand at ({pose.x_m:.3f}, {pose.y_m:.3f}): wall or obstacle"
+        with self._lock:
+            self._truth = self._odom = Pose2D(pose.x_m, pose.y_m, wrap_angle(pose.heading_rad))
+            self._stalled = False
+        return None
+
     def collides(self, x_m: float, y_m: float) -> bool:
         """Does the base's footprint disc at (x, y) overlap a wall or a low obstacle?"""
         r = self.limits.radius_m

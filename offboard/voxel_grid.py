@@ -1,0 +1,67 @@
+"""The tessellation of the search region Ω into cubes c_i (report §3.1).
+
+World coordinates live on the wire; grid indices live inside the planner. Every conversion between
+the two is a method of :class:`VoxelGrid`, the object that owns the origin and the resolution.
+The occupancy grid and the target belief share one VoxelGrid, so cube ``i`` means the same place
+in both.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class VoxelGrid:
+    """Cubes of ``resolution_m`` covering the box [origin, origin + size] (the room)."""
+
+    size_m: tuple[float, float, float]
+    resolution_m: float = 0.05
+    origin_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if self.resolution_m <= 0 or min(self.size_m) <= 0:
+            raise ValueError(f"a voxel grid needs positive sizes (got {self.size_m}, {self.resolution_m})")
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(int(np.ceil(s / self.resolution_m - 1e-9)) for s in self.size_m)
+
+    @property
+    def num_cubes(self) -> int:
+        return int(np.prod(self.shape))
+
+    @property
+    def origin(self) -> np.ndarray:
+        return np.asarray(self.origin_m, dtype=np.float64)
+
+    def index_of(self, points_m: np.ndarray) -> np.ndarray:
+        """Integer (i, j, k) of the cube holding each point (..., 3); may be outside the grid."""
+        return np.floor((points_m - self.origin) / self.resolution_m).astype(np.int64)
+
+    def contains(self, index: np.ndarray) -> np.ndarray:
+        return np.all((index >= 0) & (index < np.array(self.shape)), axis=-1)
+
+    def centers(self) -> np.ndarray:
+        """Centres of all cubes, shape (nx, ny, nz, 3), world frame."""
+        axes = [self.origin_m[a] + (np.arange(n) + 0.5) * self.resolution_m for a, n in enumerate(self.shape)]
+        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+
+    def center_of(self, index: np.ndarray) -> np.ndarray:
+        return self.origin + (np.asarray(index) + 0.5) * self.resolution_m
+
+    def floor_cell_centers(self) -> tuple[np.ndarray, np.ndarray]:
+        """x and y centres of the floor cells (columns of cubes)."""
+        nx, ny, _ = self.shape
+        return (self.origin_m[0] + (np.arange(nx) + 0.5) * self.resolution_m,
+                self.origin_m[1] + (np.arange(ny) + 0.5) * self.resolution_m)
+
+    def box_slices(self, min_m: np.ndarray, max_m: np.ndarray) -> tuple[slice, slice, slice]:
+        """Index slices of the cubes whose centres lie inside an axis-aligned box."""
+        lo = np.ceil((np.asarray(min_m) - self.origin) / self.resolution_m - 0.5).astype(int)
+        hi = np.floor((np.asarray(max_m) - self.origin) / self.resolution_m - 0.5).astype(int) + 1
+        lo = np.clip(lo, 0, self.shape)
+        hi = np.clip(hi, 0, self.shape)
+        return tuple(slice(a, max(a, b)) for a, b in zip(lo, hi))
