@@ -1,0 +1,111 @@
+"""How likely a detector is to find the target from a given viewpoint (report §6.1).
+
+An object-centred, viewpoint-dependent detectability function: the detection rate of one detector
+by distance to the target, angle of the target off the optical axis, and angle between the viewing
+ray and the normal of the target's pictured face. It is *measured* by running the real detector on
+simulated views (``syt-offboard calibrate-detector``) and saved as JSON; the planner's detection
+function b(c, f) reads it. :meth:`DetectabilityTable.nominal` gives a smooth stand-in for tests and
+for a detector that has not been calibrated yet.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class DetectabilityTable:
+    detector: str
+    distance_edges_m: np.ndarray  # (nd + 1,) bin edges; outside them the rate is 0
+    off_axis_edges_deg: np.ndarray  # (no + 1,) angle of the target off the optical axis
+    facing_edges_deg: np.ndarray  # (nf + 1,) angle between the viewing ray and the face's normal
+    rate: np.ndarray  # (nd, no, nf) detection rate per cell
+    samples: np.ndarray  # (nd, no, nf) views measured per cell (0 for a nominal table)
+    false_positive_rate: float  # false detections per image without the target
+    cost_ms: float  # median cost of the detector per image
+
+    def __post_init__(self) -> None:
+        shape = (len(self.distance_edges_m) - 1, len(self.off_axis_edges_deg) - 1, len(self.facing_edges_deg) - 1)
+        if self.rate.shape != shape or self.samples.shape != shape:
+            raise ValueError(f"rate and samples must have shape {shape}, not {self.rate.shape} / {self.samples.shape}")
+        if np.any((self.rate < 0) | (self.rate > 1)) or not np.all(np.isfinite(self.rate)):
+            raise ValueError("detection rates must lie in [0, 1]")
+        for name in ("distance_edges_m", "off_axis_edges_deg", "facing_edges_deg"):
+            steps = np.diff(getattr(self, name))
+            if steps.size == 0 or steps.min() <= 0 or not np.allclose(steps, steps[0]):
+                raise ValueError(f"{name} must be evenly spaced and increasing (bins are looked up by arithmetic)")
+
+    @property
+    def range_m(self) -> tuple[float, float]:
+        """Nearest and farthest distance with a non-zero rate: the sensed sphere's inner/outer radius."""
+        useful = np.nonzero(self.rate.max(axis=(1, 2)) > 0.05)[0]
+        if useful.size == 0:
+            return (0.0, 0.0)
+        return float(self.distance_edges_m[useful[0]]), float(self.distance_edges_m[useful[-1] + 1])
+
+    @property
+    def max_facing_deg(self) -> float:
+        useful = np.nonzero(self.rate.max(axis=(0, 1)) > 0.05)[0]
+        return float(self.facing_edges_deg[useful[-1] + 1]) if useful.size else 0.0
+
+    def lookup(self, distance_m: np.ndarray, off_axis_deg: np.ndarray, facing_deg: np.ndarray) -> np.ndarray:
+        """Detection probability per query (nearest cell; zero outside the measured ranges)."""
+        idx = [np.searchsorted(edges, np.asarray(x), side="right") - 1 for edges, x in
+               ((self.distance_edges_m, distance_m), (self.off_axis_edges_deg, np.abs(off_axis_deg)),
+                (self.facing_edges_deg, np.abs(facing_deg)))]
+        inside = np.ones(np.broadcast(*idx).shape, bool)
+        for i, n in zip(idx, self.rate.shape):
+            inside &= (i >= 0) & (i < n)
+        clipped = [np.clip(i, 0, n - 1) for i, n in zip(idx, self.rate.shape)]
+        return np.where(inside, self.rate[tuple(clipped)], 0.0)
+
+    # --- persistence -------------------------------------------------------------------------------
+
+    def save(self, path: Path) -> None:
+        data = {"detector": self.detector, "false_positive_rate": self.false_positive_rate,
+                "cost_ms": self.cost_ms,
+                **{k: getattr(self, k).tolist() for k in
+                   ("distance_edges_m", "off_axis_edges_deg", "facing_edges_deg", "rate", "samples")}}
+        Path(path).write_text(json.dumps(data))
+
+    @classmethod
+    def load(cls, path: Path) -> DetectabilityTable:
+        try:
+            data = json.loads(Path(path).read_text())
+            return cls(data["detector"], *(np.asarray(data[k], float) for k in
+                                           ("distance_edges_m", "off_axis_edges_deg", "facing_edges_deg", "rate")),
+                       np.asarray(data["samples"], int), float(data["false_positive_rate"]), float(data["cost_ms"]))
+        except (OSError, KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: not a detectability table ({exc})") from None
+
+    @classmethod
+    def nominal(cls, detector: str = "nominal", near_m: float = 0.4, far_m: float = 3.0, peak: float = 0.95,
+                max_facing_deg: float = 60.0, half_fov_deg: float = 33.0, cost_ms: float = 50.0) -> DetectabilityTable:
+        """A smooth stand-in: ``peak`` inside [near, far], falling off towards far, the image edge and
+        grazing views; zero beyond ``max_facing_deg``."""
+        d_edges = np.round(np.arange(0.0, far_m + 0.5 + 1e-9, 0.25), 6)
+        o_edges = np.linspace(0.0, half_fov_deg + 12.0, 10)
+        f_edges = np.arange(0.0, 91.0, 10.0)
+        d = (d_edges[:-1] + d_edges[1:]) / 2
+        o = (o_edges[:-1] + o_edges[1:]) / 2
+        f = (f_edges[:-1] + f_edges[1:]) / 2
+        by_distance = np.where((d >= near_m) & (d <= far_m), 1.0 - 0.3 * np.clip((d - near_m) / (far_m - near_m), 0, 1) ** 2, 0.0)
+        by_off_axis = np.where(o <= half_fov_deg, 1.0 - 0.2 * (o / half_fov_deg) ** 2, 0.0)
+        by_facing = np.where(f <= max_facing_deg, np.cos(np.radians(f)) ** 0.5, 0.0)
+        rate = peak * by_distance[:, None, None] * by_off_axis[None, :, None] * by_facing[None, None, :]
+        return cls(detector, d_edges, o_edges, f_edges, rate, np.zeros(rate.shape, int), 0.0, cost_ms)
+
+
+def facing_angle_deg(view_azimuth_rad: np.ndarray, facing_azimuth_rad: np.ndarray) -> np.ndarray:
+    """Angle between the face's normal and the direction from the target back to the camera.
+
+    ``view_azimuth_rad`` is the azimuth of the ray from the camera to the target; the face is seen
+    head-on when its normal points straight back along that ray.
+    """
+    diff = (np.asarray(facing_azimuth_rad) - (np.asarray(view_azimuth_rad) + math.pi) + math.pi) % (2 * math.pi) - math.pi
+    return np.degrees(np.abs(diff))
