@@ -43,7 +43,10 @@ class TargetBelief:
 
     @property
     def facing_azimuths_rad(self) -> np.ndarray:
-        """World azimuth of the face's normal in each facing sector."""
+        """World azimuth of the face's normal in each facing sector; with a single sector, NaN: the
+        report's assumption that the target faces the camera, whichever way it looks."""
+        if self.facing_sectors == 1:
+            return np.array([np.nan])
         return np.arange(self.facing_sectors) * (2.0 * math.pi / self.facing_sectors)
 
     # --- reading -------------------------------------------------------------------------------------

@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numba
 import numpy as np
 
 
@@ -107,5 +108,23 @@ def facing_angle_deg(view_azimuth_rad: np.ndarray, facing_azimuth_rad: np.ndarra
     ``view_azimuth_rad`` is the azimuth of the ray from the camera to the target; the face is seen
     head-on when its normal points straight back along that ray.
     """
-    diff = (np.asarray(facing_azimuth_rad) - (np.asarray(view_azimuth_rad) + math.pi) + math.pi) % (2 * math.pi) - math.pi
-    return np.degrees(np.abs(diff))
+    facing = np.asarray(facing_azimuth_rad, float)
+    diff = (facing - (np.asarray(view_azimuth_rad) + math.pi) + math.pi) % (2 * math.pi) - math.pi
+    return np.where(np.isnan(facing), 0.0, np.degrees(np.abs(diff)))
+
+
+@numba.njit(cache=True, inline="always")
+def facing_angle(facing: float, back: float) -> float:
+    """Kernel form of :func:`facing_angle_deg`, in radians: a face's normal (azimuth in [0, 2π); NaN
+    means it faces the camera) against the azimuth from the target back to the camera (in [-π, π])."""
+    if math.isnan(facing):
+        return 0.0
+    diff = abs(facing - back)
+    return abs(diff - 2.0 * math.pi) if diff > math.pi else diff
+
+
+@numba.njit(cache=True, inline="always")
+def bin_index(edges: np.ndarray, value: float) -> int:
+    """Bin of ``value`` among evenly spaced ``edges``; -1 outside them."""
+    i = int(math.floor((value - edges[0]) / (edges[1] - edges[0])))
+    return i if 0 <= i < edges.shape[0] - 1 else -1

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from offboard.detectability import DetectabilityTable
+from offboard.detectability import DetectabilityTable, bin_index, facing_angle
 from offboard.occupancy import OccupancyGrid
 from offboard.voxel_grid import VoxelGrid
 from shared.geometry import Intrinsics, RigidTransform
@@ -92,13 +92,6 @@ def _frustum_bounds(grid: VoxelGrid, camera_in_world: RigidTransform, k: Intrins
 
 
 @numba.njit(cache=True, inline="always")
-def _bin(edges, value):
-    """Bin of ``value`` among evenly spaced ``edges``, -1 outside."""
-    i = int(math.floor((value - edges[0]) / (edges[1] - edges[0])))
-    return i if 0 <= i < edges.shape[0] - 1 else -1
-
-
-@numba.njit(cache=True, inline="always")
 def _seen(i, j, k, origin, res, rotation, translation, camera, depth_z, d_edges, o_edges):
     """Distance and off-axis bins of a cube if the look saw it (centre in the image, in range, not
     occluded), else (-1, -1); also the vector from the camera to the cube."""
@@ -120,7 +113,7 @@ def _seen(i, j, k, origin, res, rotation, translation, camera, depth_z, d_edges,
         return -1, -1, wx, wy  # outside the detector's range
     if z > depth_z[int(v + 0.5) // int(block), int(u + 0.5) // int(block)] + behind:
         return -1, -1, wx, wy  # occluded
-    return _bin(d_edges, dist), _bin(o_edges, math.degrees(math.acos(min(z / dist, 1.0)))), wx, wy
+    return bin_index(d_edges, dist), bin_index(o_edges, math.degrees(math.acos(min(z / dist, 1.0)))), wx, wy
 
 
 @numba.njit(cache=True, parallel=True)
@@ -148,10 +141,8 @@ def _fill_seen(origin, res, shape, lo, hi, rotation, translation, camera, depth_
                     continue
                 back = math.atan2(-wy, -wx)  # from the cube back towards the camera
                 for s in range(facings.shape[0]):
-                    diff = abs(facings[s] - back)  # facings in [0, 2π), back in [-π, π]
-                    if diff > math.pi:
-                        diff = abs(diff - 2.0 * math.pi)
-                    fbin = _bin(f_edges, math.degrees(diff))
+                    diff = facing_angle(facings[s], back)
+                    fbin = bin_index(f_edges, math.degrees(diff))
                     prob[n, s] = rate[dbin, obin, fbin] if fbin >= 0 else 0.0
                 index[n] = (i * shape[1] + j) * shape[2] + k
                 n += 1

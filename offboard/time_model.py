@@ -1,0 +1,59 @@
+"""t(f): how long an action takes on the robot (report §3.1), from the limits the robot reports.
+
+An action moves the sensor (travel along the navigation path, turning, slewing the pan-tilt unit),
+takes an image, and analyses it. Travel is costed along the path the navigator would drive, not
+the straight line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from shared.geometry import wrap_angle
+from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
+
+
+@dataclass(frozen=True)
+class LookPlan:
+    """How to point the camera at a world azimuth from the current heading."""
+
+    base_turn_rad: float  # 0 unless the pan-tilt unit cannot reach the azimuth by itself
+    pan_rad: float
+    tilt_rad: float
+    time_s: float  # turning + slewing + capture + processing
+
+
+@dataclass(frozen=True)
+class TimeModel:
+    base: BaseLimits
+    pantilt: PanTiltLimits
+    camera: CameraTiming
+    processing_s: float = 0.5  # stereo, detection, map and belief update, planning (measured at run time)
+
+    @property
+    def image_s(self) -> float:
+        return self.camera.capture_s + self.processing_s
+
+    def look(self, heading_rad: float, pan_rad: float, tilt_rad: float, azimuth_rad: float,
+             target_tilt_rad: float) -> LookPlan:
+        """Point at ``azimuth_rad`` (world) and ``target_tilt_rad``, turning the base only if needed."""
+        wanted = wrap_angle(azimuth_rad - heading_rad)
+        limit_lo, limit_hi = math.radians(self.pantilt.pan_min_deg), math.radians(self.pantilt.pan_max_deg)
+        pan = min(max(wanted, limit_lo), limit_hi)
+        turn = wrap_angle(wanted - pan)
+        slew = self.pantilt.slew_time_s(math.degrees(pan - pan_rad), math.degrees(target_tilt_rad - tilt_rad))
+        return LookPlan(turn, pan, target_tilt_rad, self.base.turn_time_s(turn) + slew + self.image_s)
+
+    def look_times_s(self, heading_rad: float, pan_rad: float, tilt_rad: float, azimuths_rad: np.ndarray,
+                     tilts_rad: np.ndarray) -> np.ndarray:
+        return np.array([self.look(heading_rad, pan_rad, tilt_rad, a, t).time_s
+                         for a, t in zip(azimuths_rad, tilts_rad)])
+
+    def travel_s(self, path_length_m: float, turn_rad: float) -> float:
+        """Drive a path of this length after turning towards it."""
+        if not math.isfinite(path_length_m):
+            return math.inf
+        return self.base.turn_time_s(turn_rad) + self.base.drive_time_s(path_length_m)
