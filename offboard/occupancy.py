@@ -131,21 +131,13 @@ class OccupancyGrid:
 
     def coarsened(self, factor: int) -> OccupancyGrid:
         """The same map in cubes ``factor`` times larger: a block is as occupied as its most occupied
-        cube and observed if any cube is. Ray casts on it take ``factor`` times fewer steps."""
+        observed cube and observed if any cube is. Ray casts on it take ``factor`` times fewer steps."""
         if factor <= 1:
             return self
         shape = tuple(-(-n // factor) for n in self.grid.shape)
         coarse = OccupancyGrid(VoxelGrid(tuple(n * factor * self.grid.resolution_m for n in shape),
                                          self.grid.resolution_m * factor, self.grid.origin_m), self.config)
-        padded = np.full(tuple(n * factor for n in shape), self.config.clamp_min, np.float32)
-        seen = np.zeros(padded.shape, np.bool_)
-        nx, ny, nz = self.grid.shape
-        padded[:nx, :ny, :nz] = np.where(self.observed, self.log_odds, self.config.clamp_min)
-        seen[:nx, :ny, :nz] = self.observed
-        blocks = (shape[0], factor, shape[1], factor, shape[2], factor)
-        coarse.log_odds[:] = padded.reshape(blocks).max(axis=(1, 3, 5))
-        coarse.observed[:] = seen.reshape(blocks).any(axis=(1, 3, 5))
-        coarse.log_odds[~coarse.observed] = 0.0
+        _max_pool(self.log_odds, self.observed, factor, coarse.log_odds, coarse.observed)
         return coarse
 
     def floor_map(self, robot_radius_m: float, robot_height_m: float, floor_clearance_m: float = 0.1) -> FloorMap:
@@ -165,6 +157,18 @@ class OccupancyGrid:
 
 
 # --- kernels ---------------------------------------------------------------------------------------
+
+@numba.njit(cache=True)
+def _max_pool(log_odds, observed, factor, out_log_odds, out_observed):
+    nx, ny, nz = log_odds.shape
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                if observed[i, j, k]:
+                    a, b, c = i // factor, j // factor, k // factor
+                    if not out_observed[a, b, c] or log_odds[i, j, k] > out_log_odds[a, b, c]:
+                        out_log_odds[a, b, c] = log_odds[i, j, k]
+                    out_observed[a, b, c] = True
 
 @numba.njit(cache=True)
 def _flat(i, j, k, shape):

@@ -103,3 +103,15 @@ def test_tilted_views_place_points_in_the_right_world_cubes():
     occ.integrate_disparity(disparity.astype(np.float32), K, MOUNT.baseline_m, cam)
     occupied_z = ROOM.centers()[occ.occupied()][:, 2]
     assert occupied_z.size > 0 and np.percentile(occupied_z, 95) < 0.15
+
+
+def test_a_coarsened_map_keeps_obstacles_and_what_was_observed():
+    occ = OccupancyGrid(ROOM)
+    occ.integrate_disparity(_wall_disparity(2.0), K, MOUNT.baseline_m, _facing_east())
+    coarse = occ.coarsened(4)
+    assert coarse.grid.resolution_m == pytest.approx(0.2) and coarse.grid.shape == (30, 20, 13)
+    occupied_fine = ROOM.centers()[occ.occupied()]
+    assert coarse.occupied()[tuple(coarse.grid.index_of(occupied_fine).T)].all()
+    assert coarse.observed.sum() < occ.observed.sum() and (coarse.state() == FREE).any()
+    rays = coarse.cast_rays(_facing_east().translation, np.array([[1.0, 0, 0]]), 10.0)
+    assert rays.distance_m[0] == pytest.approx(2.0, abs=0.25)
