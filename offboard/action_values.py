@@ -10,8 +10,8 @@ resolution (blocks of cubes, :meth:`TargetBelief.coarse_mass`); the update after
 exact per cube (:mod:`offboard.detection_function`).
 
 The covering probability ``Prob_Ψj`` of a position counts the mass inside its sensed sphere that a
-look from there could detect at all: mass whose facing turns away from the position is excluded, so
-a position does not look promising for what it can never see.
+look from there could detect at all: inside the view of one of the settings, with a facing turned
+towards the position. A position does not look promising for what it can never see.
 """
 
 from __future__ import annotations
@@ -163,16 +163,14 @@ def _score(mass, distance, sphere_bin, distance_bin, facing_bin, off_axis_bin, r
             sb = sphere_bin[p, c]
             if sb < 0 or distance[p, c] > radius[p, sb] + margin:
                 continue  # out of reach, or behind the first obstacle in that direction
-            for s in range(n_fac):
-                fb = facing_bin[p, c, s]
-                if fb >= 0 and facing_ok[fb]:
-                    covering[p] += mass[c, s]
             db = distance_bin[p, c]
-            if db < 0:
-                continue
+            in_a_view = False
             for a in range(n_set):
                 ob = off_axis_bin[p, c, a]
                 if ob < 0:
+                    continue
+                in_a_view = True
+                if db < 0:
                     continue
                 value = 0.0
                 for s in range(n_fac):
@@ -180,4 +178,10 @@ def _score(mass, distance, sphere_bin, distance_bin, facing_bin, off_axis_bin, r
                     if fb >= 0:
                         value += mass[c, s] * rate[db, ob, fb]
                 detection[p, a] += value
+            if not in_a_view:
+                continue  # no setting looks there: it is not part of what this position covers
+            for s in range(n_fac):
+                fb = facing_bin[p, c, s]
+                if fb >= 0 and facing_ok[fb]:
+                    covering[p] += mass[c, s]
     return detection, covering

@@ -1,13 +1,18 @@
 """``syt-offboard``: the planner's side.
 
-    syt-offboard tour --connect ENDPOINT --out DIR     drive a short scripted tour and save the images
-    syt-offboard demo [--out DIR]                      start a simulated robot and run the tour on it
+    syt-offboard search --connect ENDPOINT --target-picture P --target-size X,Y,Z --out DIR [...]
+    syt-offboard demo [--world paper-lab] [--out demo-out]   a simulated robot and a search, two processes
+    syt-offboard tour --connect ENDPOINT --out DIR           a short scripted drive, saving the images
+    syt-offboard bench perception|planner|navigation --json
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
+import math
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -17,48 +22,137 @@ from shared.transport import TransportConfig, add_transport_args, transport_from
 log = logging.getLogger("syt.offboard")
 
 
+def _floats(count: int, what: str):
+    def parse(text: str) -> tuple[float, ...]:
+        try:
+            values = tuple(float(v) for v in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what}: expected {count} comma-separated numbers, got {text!r}") from None
+        if len(values) != count or not all(math.isfinite(v) and v > 0 for v in values):
+            raise argparse.ArgumentTypeError(f"{what}: expected {count} positive comma-separated numbers, got {text!r}")
+        return values
+    return parse
+
+
+def _probability(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"--move-threshold must lie in [0, 1], got {text}")
+    return value
+
+
+# --- search ----------------------------------------------------------------------------------------
+
+def _add_search_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--target-picture", action="append", type=Path, required=True, metavar="PATH",
+                        help="a picture of the target's textured face (repeatable)")
+    parser.add_argument("--target-size", type=_floats(3, "--target-size"), default=(0.23, 0.23, 0.23),
+                        metavar="X,Y,Z", help="target extents in metres; the picture covers the Y × Z face")
+    parser.add_argument("--room", type=_floats(3, "--room"), default=(9.0, 5.0, 2.5), metavar="X,Y,Z",
+                        help="the search region's size in metres, from the floor corner at the origin")
+    parser.add_argument("--cost", type=int, choices=(1, 2, 3, 4), default=3, help="cost function (report §5.2.1)")
+    parser.add_argument("--prior", action="append", default=[], metavar="KIND",
+                        help="uniform | hints:FILE | surfaces | saliency | last-seen:X,Y,Z[,S] (repeatable)")
+    parser.add_argument("--budget-s", type=float, default=1800.0, metavar="SECONDS", help="robot-time budget K")
+    parser.add_argument("--move-threshold", type=_probability, default=None, metavar="P", help="Θ_move")
+    parser.add_argument("--detector", choices=("sift", "ncc", "auto"), default="sift")
+    parser.add_argument("--detectability", action="append", default=[], metavar="NAME=FILE",
+                        help="a detector's measured detectability table (from calibrate-detector)")
+    parser.add_argument("--config", type=Path, metavar="FILE.toml", help="search configuration (SearchConfig)")
+    parser.add_argument("--out", type=Path, default=Path("search-out"), metavar="DIR")
+    parser.add_argument("--spawn", action="store_true", help="stream the recording to a new Rerun viewer")
+    parser.add_argument("--connect-viewer", metavar="URL", help="stream the recording to a running Rerun viewer")
+
+
+def _search(args: argparse.Namespace) -> int:
+    from offboard.search_run import SearchRequest, run_search
+
+    request = SearchRequest(
+        pictures=tuple(args.target_picture), target_size_m=args.target_size, room_m=args.room, cost=args.cost,
+        priors=tuple(args.prior) or ("uniform",), budget_s=args.budget_s, move_threshold=args.move_threshold,
+        detector=args.detector, detectability=tuple(args.detectability), config_path=args.config, out_dir=args.out,
+        spawn=args.spawn, viewer_url=args.connect_viewer)
+    summary = run_search(transport_from_args(args), request)
+    sys.stdout.write(json.dumps(summary) + "\n")
+    return 0 if summary["found"] else 3
+
+
+# --- demo and tour ---------------------------------------------------------------------------------
+
 def _tour(args: argparse.Namespace) -> int:
-    return _run_tour(transport_from_args(args), args.out)
-
-
-def _run_tour(transport: TransportConfig, out_dir: Path) -> int:
     from offboard.robot_client import RobotClient
     from offboard.tour import run_tour
 
+    transport = transport_from_args(args)
     with transport.open() as session, RobotClient(session, transport.robot_id) as robot:
-        paths = run_tour(robot, out_dir)
-    log.info("wrote %d files to %s", len(paths), out_dir)
+        paths = run_tour(robot, args.out)
+    log.info("wrote %d files to %s", len(paths), args.out)
     return 0
 
 
 def _demo(args: argparse.Namespace) -> int:
+    from offboard.search_run import SearchRequest, run_search
     from shared.launch import onboard_agent
 
-    out = args.out
+    out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
+    picture = out / "target.png"
+    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(picture)], check=True)
     started = time.monotonic()
     with onboard_agent(["--backend", "sim", "--world", args.world], out / "onboard.log") as agent:
         transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
-        code = _run_tour(transport, out / "images")
+        with transport.open() as session:
+            agent.wait_ready(session, "syt")
+        request = SearchRequest(pictures=(picture,), target_size_m=(0.23, 0.23, 0.23), room_m=args.room,
+                                cost=3, priors=("uniform",), out_dir=out, spawn=args.spawn)
+        summary = run_search(transport, request)
     sys.stdout.write(
-        f"demo finished in {time.monotonic() - started:.1f} s\n"
-        f"  stereo pairs and metadata: {out / 'images'}\n"
-        f"  onboard agent log:        {out / 'onboard.log'}\n")
-    return code
+        f"\nsearch {'found the target' if summary['found'] else 'ended: ' + summary['status']} in "
+        f"{summary['actions']} looks, {summary['distance_m']:.1f} m, {summary['robot_time_s'] / 60:.1f} min of "
+        f"robot time ({time.monotonic() - started:.0f} s here)\n"
+        f"  target estimate:  {summary['target_estimate_m']}\n"
+        f"  summary:          {out / 'summary.json'}\n"
+        f"  top view:         {out / 'search.png'}\n"
+        f"  recording:        {out / 'search.rrd'}   (open it: .venv/bin/rerun {out / 'search.rrd'})\n"
+        f"  logs:             {out / 'search.log'}, {out / 'onboard.log'}\n")
+    return 0 if summary["found"] else 3
+
+
+# --- benchmarks ------------------------------------------------------------------------------------
+
+def _bench(args: argparse.Namespace) -> int:
+    if args.what == "planner":
+        from offboard.bench_planner import run
+    elif args.what == "perception":
+        from offboard.bench_perception import run
+    else:
+        from offboard.bench_navigation import run
+    sys.stdout.write(json.dumps(run()) + "\n")
+    return 0
 
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="syt-offboard", description="The planner side of syt.")
     parser.add_argument("-v", "--verbose", action="store_true")
     sub = parser.add_subparsers(dest="command", required=True)
+    search = sub.add_parser("search", help="search for the target with a robot over Zenoh")
+    add_transport_args(search)
+    _add_search_args(search)
+    search.set_defaults(func=_search)
+    demo = sub.add_parser("demo", help="start a simulated robot and search with it (two processes, loopback)")
+    demo.add_argument("--world", default="paper-lab")
+    demo.add_argument("--room", type=_floats(3, "--room"), default=(9.0, 5.0, 2.5), metavar="X,Y,Z")
+    demo.add_argument("--out", type=Path, default=Path("demo-out"), metavar="DIR")
+    demo.add_argument("--spawn", action="store_true", help="also stream to a new Rerun viewer")
+    demo.set_defaults(func=_demo)
     tour = sub.add_parser("tour", help="drive a short scripted tour and save the captures")
     add_transport_args(tour)
     tour.add_argument("--out", type=Path, default=Path("tour-out"), metavar="DIR")
     tour.set_defaults(func=_tour)
-    demo = sub.add_parser("demo", help="start a simulated robot and drive it (two processes, loopback)")
-    demo.add_argument("--world", default="paper-lab")
-    demo.add_argument("--out", type=Path, default=Path("demo-out"), metavar="DIR")
-    demo.set_defaults(func=_demo)
+    bench = sub.add_parser("bench", help="measure a part; prints one JSON object")
+    bench.add_argument("what", choices=("perception", "planner", "navigation"))
+    bench.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")
+    bench.set_defaults(func=_bench)
     return parser
 
 

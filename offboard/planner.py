@@ -43,7 +43,7 @@ class PlannerConfig:
     move_threshold: float = field(default=0.02, metadata=bounds(0.0, 1.0))  # Θ_move
     distance_weight: float = field(default=1.0, metadata=bounds(0.0, 1e3))  # A of eq. 12 (report: 1)
     budget_s: float = field(default=1800.0, metadata=bounds(1.0, 1e6))  # K, robot time
-    min_detection_prob: float = field(default=1e-3, metadata=bounds(0.0, 1.0))  # below: not worth a look
+    min_detection_prob: float = field(default=2e-3, metadata=bounds(0.0, 1.0))  # below: not worth a look
     grid_spacing_m: float = field(default=1.0, metadata=bounds(0.1, 10.0))  # candidate positions
     tilts_deg: tuple[float, ...] = (0.0, 30.0)  # the report's two tilts
     view_overlap: float = field(default=0.4, metadata=bounds(0.0, 0.9))  # between neighbouring settings
@@ -65,6 +65,7 @@ class Decision:
     status: Literal["budget", "exhausted", ""] = ""
     covering_here: float = 0.0
     values: ActionValues | None = None  # candidates' rows first, the current position's last
+    setting: int = -1  # index into the planner's camera settings
 
 
 def candidate_positions(room_size_m: tuple[float, float, float], spacing_m: float) -> np.ndarray:
@@ -93,10 +94,14 @@ class SearchPlanner:
         return len(self.positions) * len(self.settings)
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float,
-               occupancy: OccupancyGrid, path_lengths_m: np.ndarray) -> Decision:
+               occupancy: OccupancyGrid, path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
         """The next action from ``pose`` (pan-tilt at ``pan_rad``, ``tilt_rad``), ``elapsed_s`` into the
-        search; ``path_lengths_m`` is the navigation distance to each candidate (inf: unreachable)."""
+        search; ``path_lengths_m`` is the navigation distance to each candidate (inf: unreachable);
+        ``taken``: the settings already looked at from this position (each is taken once, as in the
+        report: the same view again would repeat what the belief already accounts for)."""
         values = self._values(pose, occupancy)
+        if taken:
+            values.detection_prob[-1, sorted(taken)] = 0.0
         here_detection, here_covering = values.detection_prob[-1], float(values.covering_prob[-1])
         look_t = self.time_model.look_times_s(pose.heading_rad, pan_rad, tilt_rad, self.settings.azimuth_rad,
                                               self.settings.tilt_rad)
@@ -155,7 +160,7 @@ class SearchPlanner:
         s = int(np.argmax(utility))
         return Decision("look", f"covering probability here {covering:.3f} ≥ Θ_move {self.config.move_threshold:g}",
                         self.settings.azimuth_rad[s], self.settings.tilt_rad[s], None, float(detection[s]),
-                        float(utility[s]), float(look_t[s]), covering_here=covering, values=values)
+                        float(utility[s]), float(look_t[s]), covering_here=covering, values=values, setting=s)
 
     def _eq9(self, values: ActionValues, look_t: np.ndarray, far_t: np.ndarray, covering: float) -> Decision:
         """Cost 1: the largest detection probability among all reachable actions, wherever they are."""
@@ -165,7 +170,7 @@ class SearchPlanner:
             s = int(np.argmax(here))
             return Decision("look", "eq. 9: the best action is here", self.settings.azimuth_rad[s],
                             self.settings.tilt_rad[s], None, float(here[s]), float(here[s]), float(look_t[s]),
-                            covering_here=covering, values=values)
+                            covering_here=covering, values=values, setting=s)
         j, s = np.unravel_index(int(np.argmax(far)), far.shape)
         return Decision("move", f"eq. 9: the best action is at ({self.positions[j][0]:g}, {self.positions[j][1]:g})",
                         self.settings.azimuth_rad[s], self.settings.tilt_rad[s], tuple(self.positions[j]),
@@ -193,4 +198,4 @@ class SearchPlanner:
                                 f"{equation} picks ({self.positions[j][0]:g}, {self.positions[j][1]:g})",
                         self.settings.azimuth_rad[s], self.settings.tilt_rad[s], tuple(self.positions[j]),
                         float(values.detection_prob[j, s]), float(score[j]), float(far_t[j, s]),
-                        covering_here=covering, values=values)
+                        covering_here=covering, values=values, setting=s)

@@ -3,6 +3,7 @@
     syt-onboard --backend sim --world paper-lab [--start X,Y,HEADING_DEG] [--target X,Y,Z,YAW_DEG]
     syt-onboard render --world FILE [--start ..] [--pan DEG] [--tilt DEG] --out DIR
     syt-onboard bench --json
+    syt-onboard picture NAME --out FILE.png          a built-in picture (the target's) for the planner
 """
 
 from __future__ import annotations
@@ -140,7 +141,29 @@ def run_bench(argv: list[str]) -> int:
     return 0
 
 
-_COMMANDS = {"render": run_render, "bench": run_bench}
+def run_picture(argv: list[str]) -> int:
+    """Export a built-in picture (the default target's, for instance) for the planner's target model."""
+    parser = argparse.ArgumentParser(prog="syt-onboard picture", description="Write a built-in picture as PNG.")
+    parser.add_argument("name", help="a built-in picture name, e.g. target")
+    parser.add_argument("--out", type=Path, required=True, metavar="FILE.png")
+    args = parser.parse_args(argv)
+    _setup_logging(False)
+    import cv2
+
+    from onboard.sim.textures import PictureError, load_picture
+
+    try:
+        picture = load_picture(args.name)
+    except PictureError as exc:
+        log.error("%s", exc)
+        return 2
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(args.out), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR))
+    sys.stdout.write(f"{args.out}\n")
+    return 0
+
+
+_COMMANDS = {"render": run_render, "bench": run_bench, "picture": run_picture}
 
 
 def main(argv: list[str] | None = None) -> int:
