@@ -139,8 +139,9 @@ def _geometry(centers, positions, geometry, n_el, n_az, rotations, d_edges, o_ed
             sphere_bin[p, c] = ei * n_az + ai
             distance_bin[p, c] = bin_index(d_edges, dist)
             back = math.atan2(-wy, -wx)
+            cos_el = math.hypot(wx, wy) / dist
             for s in range(n_fac):
-                diff = facing_angle(facings[s], back)
+                diff = facing_angle(facings[s], back, cos_el)
                 facing_bin[p, c, s] = bin_index(f_edges, math.degrees(diff))
             for a in range(n_set):
                 r = rotations[a]

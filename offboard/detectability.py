@@ -102,25 +102,25 @@ class DetectabilityTable:
         return cls(detector, d_edges, o_edges, f_edges, rate, np.zeros(rate.shape, int), 0.0, cost_ms)
 
 
-def facing_angle_deg(view_azimuth_rad: np.ndarray, facing_azimuth_rad: np.ndarray) -> np.ndarray:
-    """Angle between the face's normal and the direction from the target back to the camera.
-
-    ``view_azimuth_rad`` is the azimuth of the ray from the camera to the target; the face is seen
-    head-on when its normal points straight back along that ray.
-    """
+def facing_angle_deg(view_azimuth_rad: np.ndarray, facing_azimuth_rad: np.ndarray,
+                     view_elevation_rad: np.ndarray | float = 0.0) -> np.ndarray:
+    """Angle between the face's (horizontal) normal and the direction from the target back to the
+    camera; the ray from the camera to the target has azimuth ``view_azimuth_rad`` and elevation
+    ``view_elevation_rad``. The face is seen head-on when its normal points straight back along it."""
     facing = np.asarray(facing_azimuth_rad, float)
-    diff = (facing - (np.asarray(view_azimuth_rad) + math.pi) + math.pi) % (2 * math.pi) - math.pi
-    return np.where(np.isnan(facing), 0.0, np.degrees(np.abs(diff)))
+    cos = np.cos(view_elevation_rad) * np.cos(facing - (np.asarray(view_azimuth_rad) + math.pi))
+    return np.where(np.isnan(facing), 0.0, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
 
 
 @numba.njit(cache=True, inline="always")
-def facing_angle(facing: float, back: float) -> float:
-    """Kernel form of :func:`facing_angle_deg`, in radians: a face's normal (azimuth in [0, 2π); NaN
-    means it faces the camera) against the azimuth from the target back to the camera (in [-π, π])."""
+def facing_angle(facing: float, back: float, cos_elevation: float) -> float:
+    """Angle (rad) between a face's normal — horizontal, at azimuth ``facing`` in [0, 2π); NaN means
+    it faces the camera — and the 3D direction from the target back to the camera, whose azimuth is
+    ``back`` (in [-π, π]) and whose elevation has cosine ``cos_elevation``: a face seen from below or
+    above is foreshortened as much as one seen from the side."""
     if math.isnan(facing):
         return 0.0
-    diff = abs(facing - back)
-    return abs(diff - 2.0 * math.pi) if diff > math.pi else diff
+    return math.acos(max(-1.0, min(1.0, cos_elevation * math.cos(facing - back))))
 
 
 @numba.njit(cache=True, inline="always")

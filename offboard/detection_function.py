@@ -103,17 +103,17 @@ def _seen(i, j, k, origin, res, rotation, translation, camera, depth_z, d_edges,
     y = rotation[0, 1] * wx + rotation[1, 1] * wy + rotation[2, 1] * wz
     z = rotation[0, 2] * wx + rotation[1, 2] * wy + rotation[2, 2] * wz
     if z <= 0.0:
-        return -1, -1, wx, wy
+        return -1, -1, wx, wy, wz
     u = fx * x / z + cx
     v = fy * y / z + cy
     if not (-0.5 <= u < width - 0.5 and -0.5 <= v < height - 0.5):
-        return -1, -1, wx, wy  # the centre is outside the image
+        return -1, -1, wx, wy, wz  # the centre is outside the image
     dist = math.sqrt(x * x + y * y + z * z)
     if dist < near or dist > far:
-        return -1, -1, wx, wy  # outside the detector's range
+        return -1, -1, wx, wy, wz  # outside the detector's range
     if z > depth_z[int(v + 0.5) // int(block), int(u + 0.5) // int(block)] + behind:
-        return -1, -1, wx, wy  # occluded
-    return bin_index(d_edges, dist), bin_index(o_edges, math.degrees(math.acos(min(z / dist, 1.0)))), wx, wy
+        return -1, -1, wx, wy, wz  # occluded
+    return bin_index(d_edges, dist), bin_index(o_edges, math.degrees(math.acos(min(z / dist, 1.0)))), wx, wy, wz
 
 
 @numba.njit(cache=True, parallel=True)
@@ -122,7 +122,7 @@ def _count_seen(origin, res, lo, hi, rotation, translation, camera, depth_z, d_e
     for di in numba.prange(hi[0] - lo[0] + 1):
         for j in range(lo[1], hi[1] + 1):
             for k in range(lo[2], hi[2] + 1):
-                a, b, _, _ = _seen(lo[0] + di, j, k, origin, res, rotation, translation, camera, depth_z, d_edges, o_edges)
+                a, b, _, _, _ = _seen(lo[0] + di, j, k, origin, res, rotation, translation, camera, depth_z, d_edges, o_edges)
                 if a >= 0 and b >= 0:
                     counts[di] += 1
     return counts
@@ -136,12 +136,13 @@ def _fill_seen(origin, res, shape, lo, hi, rotation, translation, camera, depth_
         i = lo[0] + di
         for j in range(lo[1], hi[1] + 1):
             for k in range(lo[2], hi[2] + 1):
-                dbin, obin, wx, wy = _seen(i, j, k, origin, res, rotation, translation, camera, depth_z, d_edges, o_edges)
+                dbin, obin, wx, wy, wz = _seen(i, j, k, origin, res, rotation, translation, camera, depth_z, d_edges, o_edges)
                 if dbin < 0 or obin < 0:
                     continue
                 back = math.atan2(-wy, -wx)  # from the cube back towards the camera
+                cos_el = math.hypot(wx, wy) / math.sqrt(wx * wx + wy * wy + wz * wz)
                 for s in range(facings.shape[0]):
-                    diff = facing_angle(facings[s], back)
+                    diff = facing_angle(facings[s], back, cos_el)
                     fbin = bin_index(f_edges, math.degrees(diff))
                     prob[n, s] = rate[dbin, obin, fbin] if fbin >= 0 else 0.0
                 index[n] = (i * shape[1] + j) * shape[2] + k

@@ -179,7 +179,8 @@ class SearchPlanner:
 
     def _move(self, values: ActionValues, far_t: np.ndarray, path_lengths_m: np.ndarray, covering: float,
               pose: Pose2D) -> Decision:
-        """Eq. 10-12: the next position; its first look is its best by eq. 3."""
+        """Eq. 10-12: the next position, preferring those whose covering probability is at least
+        Θ_move (the robot would leave any other at once); its first look is its best by eq. 3."""
         dist = np.asarray(path_lengths_m, float)
         away = np.hypot(self.positions[:, 0] - pose.x_m, self.positions[:, 1] - pose.y_m) > self.config.same_position_m
         usable = np.isfinite(dist) & away & (values.detection_prob[:-1].max(axis=1) >= self.config.min_detection_prob)
@@ -187,6 +188,9 @@ class SearchPlanner:
             return Decision("stop", "no reachable position left whose looks are worth taking",
                             status="exhausted", covering_here=covering, values=values)
         cover = values.covering_prob[:-1]
+        worth_staying = usable & (cover >= self.config.move_threshold)
+        if worth_staying.any():  # where the robot would not leave again at once
+            usable = worth_staying
         d = np.maximum(dist, 1e-6)
         score = {2: cover, 3: cover / d, 4: cover * (1.0 + self.config.distance_weight / d)}[self.config.cost_function]
         score = np.where(usable, score, -np.inf)

@@ -8,6 +8,7 @@ The environment is unknown: the planner never reads a world file, only the room'
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -75,12 +76,13 @@ class SearchState:
 
 class Search:
     def __init__(self, robot: RobotClient, config: SearchConfig, detectors: dict[str, tuple[Detector, DetectabilityTable]],
-                 prior: np.ndarray, dynamic: list, recorder: Recorder | None = None):
+                 prior: np.ndarray, dynamic: list, recorder: Recorder | None = None, target_depth_m: float = 0.23):
         self.robot = robot
         self.config = config
         self.detectors = detectors
         self.dynamic_priors = dynamic
         self.recorder = recorder
+        self.target_depth_m = target_depth_m
         info = robot.info()
         self.info = info
         self.mount = info.mount.to_mount()
@@ -157,6 +159,7 @@ class Search:
         self.state.trail.append((result.pose.x_m, result.pose.y_m))
         if result.status == "reached":
             self.state.positions.append((result.pose.x_m, result.pose.y_m))
+            self._look(decision)  # the look the move was chosen for
         else:
             index = int(np.argmin(np.hypot(*(self.planner.positions - np.array(goal)).T)))
             self.state.unreachable.add(index)
@@ -187,6 +190,7 @@ class Search:
     def _interpret(self, obs: Observation, table: DetectabilityTable) -> bool:
         """Found, or concentrate on a weak detection, or eq. 4 after a miss."""
         if obs.detection is not None and obs.target_m is not None:
+            obs = self._to_target_centre(obs)
             confirmed = (self.state.weak_detection is not None
                          and np.linalg.norm(obs.target_m - self.state.weak_detection) < 0.3)
             self.belief.concentrate(obs.target_m, self.config.detection_sigma_m)
@@ -208,6 +212,17 @@ class Search:
         log.info("look %d: no target; it could have found it with probability %.3f; P[F] = %.3f",
                  self.state.actions, found_prob, self.belief.success_prob)
         return False
+
+    def _to_target_centre(self, obs: Observation) -> Observation:
+        """The detection locates the pictured face; the target's centre is half its depth behind it,
+        along the viewing ray (the face is seen roughly head-on when it is detected at all)."""
+        ray = obs.target_m - obs.camera_in_world.translation
+        ray[2] = 0.0
+        norm = np.linalg.norm(ray)
+        if norm < 1e-6:
+            return obs
+        centre = obs.target_m + ray / norm * (self.target_depth_m / 2.0)
+        return dataclasses.replace(obs, target_m=centre)
 
     def _choose_detector(self, decision: Decision) -> tuple[str, tuple[Detector, DetectabilityTable]]:
         """``auto``: the detector with the best expected detection per second for this look

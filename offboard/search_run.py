@@ -106,7 +106,7 @@ def run_search(transport: TransportConfig, request: SearchRequest) -> dict:
             grid = VoxelGrid(config.room_m, config.resolution_m)
             static = [p for p in request.priors if p.split(":")[0] in ("uniform", "hints", "last-seen")]
             search = Search(robot, config, detectors, build_prior(grid, static),
-                            dynamic_priors(request.priors, grid, model), recorder)
+                            dynamic_priors(request.priors, grid, model), recorder, model.size_m[0])
             try:
                 search.run()
             finally:

@@ -1,0 +1,111 @@
+"""The full search: syt-onboard (simulator) and syt-offboard search as two processes over real Zenoh.
+
+The planner never sees the world file; the test reads it (through the simulator's loader) only to
+know the truth it then checks the search against.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from onboard.sim.world import load_world
+from shared.launch import onboard_agent
+from shared.transport import TransportConfig
+
+pytestmark = pytest.mark.integration
+
+# world, robot start override (x, y, heading°) — None keeps the world's own start
+WORLDS = [("paper-lab", None), ("office", None), ("high-shelf", None)]
+
+
+def _search(tmp_path: Path, world: str, *agent_args: str, extra: tuple[str, ...] = ()) -> tuple[dict, Path]:
+    out = tmp_path / "out"
+    picture = tmp_path / "target.png"
+    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(picture)], check=True,
+                   capture_output=True)
+    size = load_world(world).room.size_m
+    with onboard_agent(["--backend", "sim", "--world", world, *agent_args], tmp_path / "onboard.log") as agent:
+        with TransportConfig(connect=(agent.endpoint,), multicast_scouting=False).open() as session:
+            agent.wait_ready(session, "syt")
+        done = subprocess.run(
+            [sys.executable, "-m", "offboard.cli", "search", "--connect", agent.endpoint, "--no-multicast-scouting",
+             "--target-picture", str(picture), "--target-size", "0.23,0.23,0.23",
+             "--room", ",".join(f"{v:g}" for v in size), "--out", str(out), *extra],
+            capture_output=True, text=True, timeout=600)
+    assert done.returncode in (0, 3), done.stderr[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert json.loads(done.stdout.strip().splitlines()[-1]) == summary
+    return summary, out
+
+
+def _assert_found_near_truth(summary: dict, world_path: str | Path) -> None:
+    world = load_world(world_path)
+    assert summary["found"] and summary["status"] == "found", summary
+    error = np.linalg.norm(np.array(summary["target_estimate_m"]) - world.target.center_m())
+    assert error < 0.3, f"estimate {summary['target_estimate_m']} is {error:.2f} m from the target"
+
+
+def _recorded_actions(rrd: Path) -> int:
+    """How many images the recording holds on the ``action`` timeline."""
+    ticks = Counter()
+    for chunk in RrdReader(rrd).stream():
+        if chunk.entity_path == "/world/robot/head/camera/image":
+            batch = chunk.to_record_batch()
+            ticks.update(batch.column("action").to_pylist())
+    return len(ticks)
+
+
+@pytest.mark.parametrize("world,start", WORLDS, ids=[w for w, _ in WORLDS])
+def test_the_search_finds_the_target_in_every_bundled_world(tmp_path, world, start):
+    summary, out = _search(tmp_path, world, *([] if start is None else ["--start", start]))
+    _assert_found_near_truth(summary, world)
+    assert (out / "search.png").stat().st_size > 10_000 and (out / "search.log").stat().st_size > 0
+    assert _recorded_actions(out / "search.rrd") == summary["actions"]
+    assert summary["planning_ms_p50"] <= summary["planning_ms_p95"]
+    assert summary["robot_time_s"] > 0 and summary["distance_m"] >= 0
+
+
+UNSEEN_WORLD = """
+name = "storage-room"
+[room]
+size = [6.0, 7.0, 2.4]
+texture = "brick"
+[[obstacle]]
+name = "rack"
+kind = "shelf"
+min = [0.0, 2.5, 0.0]
+max = [0.6, 5.0, 1.8]
+[[obstacle]]
+name = "bench"
+kind = "table"
+min = [3.5, 5.6, 0.0]
+max = [5.5, 6.4, 0.8]
+[[obstacle]]
+name = "crate"
+kind = "crate"
+min = [2.2, 2.0, 0.0]
+max = [3.0, 2.8, 0.6]
+[target]
+picture = "target"
+size = [0.23, 0.23, 0.23]
+position = [4.5, 5.9, 0.8]
+yaw_deg = -90
+[robot]
+start = [1.5, 1.0]
+heading_deg = 90
+"""
+
+
+def test_a_world_it_has_never_seen_works_without_changes(tmp_path):
+    world = tmp_path / "storage-room.toml"
+    world.write_text(UNSEEN_WORLD)
+    summary, _ = _search(tmp_path, str(world))
+    _assert_found_near_truth(summary, world)
