@@ -14,7 +14,8 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from collections.abc import Callable
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -56,6 +57,13 @@ class SearchConfig:
     stereo: StereoConfig = StereoConfig()
 
 
+class Policy(Protocol):
+    """What chooses the next action: the SYT planner, or a baseline built around it (experiments)."""
+
+    def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
+               path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision: ...
+
+
 @dataclass
 class SearchState:
     """What has happened so far (the summary and the top view are made from it)."""
@@ -76,7 +84,8 @@ class SearchState:
 
 class Search:
     def __init__(self, robot: RobotClient, config: SearchConfig, detectors: dict[str, tuple[Detector, DetectabilityTable]],
-                 prior: np.ndarray, dynamic: list, recorder: Recorder | None = None, target_depth_m: float = 0.23):
+                 prior: np.ndarray, dynamic: list, recorder: Recorder | None = None, target_depth_m: float = 0.23,
+                 policy: Callable[[SearchPlanner], Policy] | None = None):
         self.robot = robot
         self.config = config
         self.detectors = detectors
@@ -95,6 +104,7 @@ class Search:
         self.time_model = TimeModel(info.base, info.pantilt, info.camera)
         self.planner = SearchPlanner(self.belief, config.planner, self._planning_table(), self.time_model,
                                      self.intrinsics, self.mount)
+        self.policy: Policy = policy(self.planner) if policy else self.planner
         self.perception = Perception(self.occupancy, StereoMatcher(config.stereo))
         start = robot.state()
         self._clock_start_s = start.robot_time_s
@@ -141,8 +151,8 @@ class Search:
         field_m = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
         paths = grid_planner.distances_at(floor, field_m, self.planner.positions)
         paths[list(self.state.unreachable)] = np.inf
-        decision = self.planner.decide(pose, *self._pan_tilt, self.elapsed_s(), self.occupancy, paths,
-                                       frozenset(self.state.taken))
+        decision = self.policy.decide(pose, *self._pan_tilt, self.elapsed_s(), self.occupancy, paths,
+                                      frozenset(self.state.taken))
         self.state.planning_ms.append((time.perf_counter() - started) * 1000.0)
         log.info("decision %d: %s — %s (P=%.3f, t=%.1f s)", len(self.state.planning_ms), decision.kind,
                  decision.reason, decision.detection_prob, decision.time_s)

@@ -43,6 +43,7 @@ class SearchRequest:
     out_dir: Path = Path("search-out")
     spawn: bool = False
     viewer_url: str | None = None
+    record: bool = True  # write search.rrd (experiments turn it off to save time and disk)
 
 
 def search_config(request: SearchRequest) -> SearchConfig:
@@ -88,15 +89,19 @@ def dynamic_priors(specs: tuple[str, ...], grid: VoxelGrid, model: TargetModel) 
     return made
 
 
-def run_search(transport: TransportConfig, request: SearchRequest) -> dict:
+def run_search(transport: TransportConfig, request: SearchRequest, policy=None) -> dict:
+    """Run one search; ``policy`` (a factory taking the SearchPlanner) replaces the SYT decisions."""
     out = request.out_dir
     out.mkdir(parents=True, exist_ok=True)
     file_log = logging.FileHandler(out / "search.log", mode="w")
     file_log.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     root = logging.getLogger()
     root.addHandler(file_log)
-    recorder = Recorder(out / "search.rrd", spawn=request.spawn, connect_url=request.viewer_url)
-    recorder.attach_logging(root)
+    recorder = None
+    if request.record or request.spawn or request.viewer_url:
+        recorder = Recorder(out / "search.rrd" if request.record else None, spawn=request.spawn,
+                            connect_url=request.viewer_url)
+        recorder.attach_logging(root)
     try:
         config = search_config(request)
         model = TargetModel.from_files(request.pictures, request.target_size_m)
@@ -106,7 +111,7 @@ def run_search(transport: TransportConfig, request: SearchRequest) -> dict:
             grid = VoxelGrid(config.room_m, config.resolution_m)
             static = [p for p in request.priors if p.split(":")[0] in ("uniform", "hints", "last-seen")]
             search = Search(robot, config, detectors, build_prior(grid, static),
-                            dynamic_priors(request.priors, grid, model), recorder, model.size_m[0])
+                            dynamic_priors(request.priors, grid, model), recorder, model.size_m[0], policy)
             try:
                 search.run()
             finally:
@@ -117,8 +122,9 @@ def run_search(transport: TransportConfig, request: SearchRequest) -> dict:
         log.info("summary: %s", summary)
         return summary
     finally:
-        recorder.detach_logging(root)
-        recorder.close()
+        if recorder:
+            recorder.detach_logging(root)
+            recorder.close()
         root.removeHandler(file_log)
         file_log.close()
 
