@@ -4,6 +4,7 @@
     syt-offboard demo [--world paper-lab] [--out demo-out]   a simulated robot and a search, two processes
     syt-offboard tour --connect ENDPOINT --out DIR           a short scripted drive, saving the images
     syt-offboard bench perception|planner|navigation --json
+    syt-offboard calibrate-detector --detector sift --target-picture P --out TABLE.json
 """
 
 from __future__ import annotations
@@ -118,6 +119,49 @@ def _demo(args: argparse.Namespace) -> int:
     return 0 if summary["found"] else 3
 
 
+# --- calibration -----------------------------------------------------------------------------------
+
+def _calibrate(args: argparse.Namespace) -> int:
+    import shutil
+    import tempfile
+
+    import numpy as np
+
+    from offboard import calibration
+    from offboard.detection.detector import make_detector
+    from offboard.detection.target_model import TargetModel
+    from offboard.robot_client import RobotClient
+    from shared.launch import onboard_agent
+
+    model = TargetModel.from_files(args.target_picture, args.target_size)
+    grid = calibration.CalibrationGrid(samples=args.samples, negatives=args.negatives)
+    with tempfile.TemporaryDirectory() as tmp:
+        world = Path(tmp) / "calibration.toml"
+        shutil.copy(args.target_picture[0], Path(tmp) / "target.png")
+        world.write_text(calibration.calibration_world("target.png", args.target_size, 1.2))
+        with onboard_agent(["--backend", "sim", "--world", str(world)], Path(tmp) / "onboard.log") as agent:
+            transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
+            with transport.open() as session, RobotClient(session, "syt") as robot:
+                agent.wait_ready(session, "syt")
+                info = robot.wait_for_robot()
+                detector = make_detector(args.detector, model, info.intrinsics.to_intrinsics())
+                face = np.array([calibration.TARGET_XY[0] + args.target_size[0] / 2, calibration.TARGET_XY[1],
+                                 info.mount.height_m])
+                tally = calibration.calibrate(robot, detector, grid, face, args.target_size[1], _progress)
+    table = calibration.to_table(args.detector, grid, tally)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    table.save(args.out)
+    sys.stderr.write("\n")
+    sys.stdout.write(json.dumps({**calibration.summary(table, tally), "table": str(args.out)}) + "\n")
+    return 0
+
+
+def _progress(done: int, total: int) -> None:
+    if done % 10 == 0 or done == total:
+        sys.stderr.write(f"\rcalibrating: {done}/{total} views")
+        sys.stderr.flush()
+
+
 # --- benchmarks ------------------------------------------------------------------------------------
 
 def _bench(args: argparse.Namespace) -> int:
@@ -149,6 +193,14 @@ def _parser() -> argparse.ArgumentParser:
     add_transport_args(tour)
     tour.add_argument("--out", type=Path, default=Path("tour-out"), metavar="DIR")
     tour.set_defaults(func=_tour)
+    calibrate = sub.add_parser("calibrate-detector", help="measure a detector's detectability table in simulation")
+    calibrate.add_argument("--detector", choices=("sift", "ncc"), default="sift")
+    calibrate.add_argument("--target-picture", action="append", type=Path, required=True, metavar="PATH")
+    calibrate.add_argument("--target-size", type=_floats(3, "--target-size"), default=(0.23, 0.23, 0.23), metavar="X,Y,Z")
+    calibrate.add_argument("--samples", type=int, default=1, help="views per cell")
+    calibrate.add_argument("--negatives", type=int, default=200, help="views without the target")
+    calibrate.add_argument("--out", type=Path, required=True, metavar="FILE.json")
+    calibrate.set_defaults(func=_calibrate)
     bench = sub.add_parser("bench", help="measure a part; prints one JSON object")
     bench.add_argument("what", choices=("perception", "planner", "navigation"))
     bench.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")
