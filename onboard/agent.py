@@ -53,7 +53,7 @@ class DeviceWorker:
 
     def __init__(self, name: str):
         self.name = name
-        self._jobs: queue.Queue[Callable[[], None] | None] = queue.Queue(maxsize=1)
+        self._jobs: queue.Queue[Callable[[], Callable[[], None] | None] | None] = queue.Queue(maxsize=1)
         self._busy = threading.Event()
         self._thread = threading.Thread(target=self._loop, name=f"worker-{name}", daemon=True)
         self._thread.start()
@@ -62,7 +62,8 @@ class DeviceWorker:
     def busy(self) -> bool:
         return self._busy.is_set()
 
-    def try_submit(self, job: Callable[[], None]) -> bool:
+    def try_submit(self, job: Callable[[], Callable[[], None] | None]) -> bool:
+        """Run ``job`` on the device's thread; it may return the reply to send once the device is free."""
         if self._busy.is_set():
             return False
         self._busy.set()
@@ -75,12 +76,15 @@ class DeviceWorker:
 
     def _loop(self) -> None:
         while (job := self._jobs.get()) is not None:
+            answer = None
             try:
-                job()
+                answer = job()
             except Exception:  # a device fault must not kill the worker
                 log.exception("%s worker: job failed", self.name)
             finally:
-                self._busy.clear()
+                self._busy.clear()  # free before the reply: the planner's next command may follow at once
+            if answer is not None:
+                answer()
 
 
 @dataclass
@@ -199,12 +203,13 @@ class Agent:
 
     def _submit(self, device: str, query: zenoh.Query, command_id: str, job: Callable[[], object],
                 arrays: str = "raw") -> None:
-        def run() -> None:
+        def run() -> Callable[[], None]:
             try:
-                self._reply(query, job(), arrays)
+                result = job()
             except Exception as exc:
                 log.exception("%s job failed", device)
-                self._reply_error(query, command_id, "device", f"{type(exc).__name__}: {exc}")
+                return lambda: self._reply_error(query, command_id, "device", f"{type(exc).__name__}: {exc}")
+            return lambda: self._reply(query, result, arrays)
         if not self._workers[device].try_submit(run):
             raise CommandRefused("busy", f"the {device} is executing another command; send stop first")
 

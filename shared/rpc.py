@@ -35,6 +35,11 @@ def request(session: zenoh.Session, key: str, command: Any, expected: type[T], t
             if echoed is not None and echoed != command.command_id:
                 raise ProtocolError("command_id", echoed, f"reply does not echo {command.command_id!r}")
             return result
-        raise CommandError(key, decode(reply.err.payload.to_bytes(), ErrorReply))
+        payload = reply.err.payload.to_bytes()
+        try:
+            error = decode(payload, ErrorReply)
+        except ProtocolError:  # not the agent's answer: Zenoh's own (a timeout, a dropped route)
+            raise RobotUnavailable(f"{key}: {payload[:200].decode('utf-8', 'replace')}") from None
+        raise CommandError(key, error)
     raise RobotUnavailable(f"no reply from {key} within {timeout_s:g} s: is the onboard agent running "
                            "and reachable (--connect/--listen)?")

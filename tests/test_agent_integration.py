@@ -236,3 +236,12 @@ def _ignore(fn, **kwargs):
         fn(**kwargs)
     except Exception:
         pass
+
+
+def test_a_command_right_after_a_motion_reply_is_not_refused_as_busy(sim_agent):
+    _, robot = sim_agent
+    for _ in range(5):  # the base is free by the time its reply arrives
+        robot.move(turn_deg=10.0)
+        robot.move(turn_deg=-10.0)
+        robot.look(5.0, 0.0)
+        robot.look(0.0, 0.0)
