@@ -88,7 +88,7 @@ def test_paper_lab_matches_the_report():
 
 def test_the_high_shelf_target_sits_high():
     target = load_world("high-shelf").target
-    assert 1.9 <= target.box().max_m[2] <= 2.05
+    assert 1.9 <= target.box().max_m[2] <= 2.2  # above a level view from the floor in front
 
 
 def test_a_minimal_valid_world_and_its_defaults(tmp_path):
