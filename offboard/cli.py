@@ -5,6 +5,7 @@
     syt-offboard tour --connect ENDPOINT --out DIR           a short scripted drive, saving the images
     syt-offboard bench perception|planner|navigation --json
     syt-offboard calibrate-detector --detector sift --target-picture P --out TABLE.json
+    syt-offboard experiment --preset paper --out DIR [--baselines] [--jobs N]
 """
 
 from __future__ import annotations
@@ -162,6 +163,14 @@ def _progress(done: int, total: int) -> None:
         sys.stderr.flush()
 
 
+# --- experiments -----------------------------------------------------------------------------------
+
+def _experiment(args: argparse.Namespace) -> int:
+    from offboard import experiment
+
+    return experiment.main(args)
+
+
 # --- benchmarks ------------------------------------------------------------------------------------
 
 def _bench(args: argparse.Namespace) -> int:
@@ -201,6 +210,8 @@ def _parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--negatives", type=int, default=200, help="views without the target")
     calibrate.add_argument("--out", type=Path, required=True, metavar="FILE.json")
     calibrate.set_defaults(func=_calibrate)
+    experiment = sub.add_parser("experiment", help="run a grid of searches (the report's Tables 2 and 3, baselines)")
+    experiment.set_defaults(func=_experiment, experiment_parser=experiment)
     bench = sub.add_parser("bench", help="measure a part; prints one JSON object")
     bench.add_argument("what", choices=("perception", "planner", "navigation"))
     bench.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")
@@ -209,7 +220,13 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    argv = sys.argv[1:] if argv is None else argv
+    if "experiment" in argv[:2]:  # its options live with the harness
+        from offboard import experiment
+
+        experiment.add_arguments(parser._subparsers._group_actions[0].choices["experiment"])
+    args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     return args.func(args)
