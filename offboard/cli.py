@@ -210,8 +210,11 @@ def _parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--negatives", type=int, default=200, help="views without the target")
     calibrate.add_argument("--out", type=Path, required=True, metavar="FILE.json")
     calibrate.set_defaults(func=_calibrate)
+    from offboard import experiment as harness  # its options live with the harness
+
     experiment = sub.add_parser("experiment", help="run a grid of searches (the report's Tables 2 and 3, baselines)")
-    experiment.set_defaults(func=_experiment, experiment_parser=experiment)
+    harness.add_arguments(experiment)
+    experiment.set_defaults(func=_experiment)
     bench = sub.add_parser("bench", help="measure a part; prints one JSON object")
     bench.add_argument("what", choices=("perception", "planner", "navigation"))
     bench.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")
@@ -220,13 +223,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = _parser()
-    argv = sys.argv[1:] if argv is None else argv
-    if "experiment" in argv[:2]:  # its options live with the harness
-        from offboard import experiment
-
-        experiment.add_arguments(parser._subparsers._group_actions[0].choices["experiment"])
-    args = parser.parse_args(argv)
+    args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     return args.func(args)
