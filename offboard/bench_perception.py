@@ -10,8 +10,6 @@ of a 9 × 5 × 2.5 m room; the detectors run on a 640 × 480 textured image hold
 from __future__ import annotations
 
 import logging
-import statistics
-import time
 
 import numpy as np
 from skimage.data import chelsea
@@ -22,6 +20,7 @@ from offboard.middlebury import evaluate_motorcycle
 from offboard.occupancy import OccupancyGrid
 from offboard.stereo import StereoMatcher, bench_pair
 from offboard.voxel_grid import VoxelGrid
+from shared.timing import median_ms
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 
 log = logging.getLogger(__name__)
@@ -30,30 +29,20 @@ K = Intrinsics.from_fov(640, 480, 66.0)
 MOUNT = HeadMount()
 
 
-def _median_ms(fn, repeats: int) -> float:
-    fn()  # warm-up: JIT compilation, caches
-    samples = []
-    for _ in range(repeats):
-        started = time.perf_counter()
-        fn()
-        samples.append((time.perf_counter() - started) * 1000.0)
-    return round(statistics.median(samples), 2)
-
-
 def run(repeats: int = 20) -> dict:
     left, right = bench_pair()
     matcher = StereoMatcher()
-    figures: dict[str, float] = {"stereo_ms": _median_ms(lambda: matcher.disparity(left, right), repeats)}
+    figures: dict[str, float] = {"stereo_ms": median_ms(lambda: matcher.disparity(left, right), repeats)}
     disparity = matcher.disparity(left, right)
     occupancy = OccupancyGrid(VoxelGrid((9.0, 5.0, 2.5), 0.05))
     camera = MOUNT.camera_in_world(Pose2D(1.0, 2.5, 0.0), 0.0, 0.0)
-    figures["occupancy_update_ms"] = _median_ms(
+    figures["occupancy_update_ms"] = median_ms(
         lambda: occupancy.integrate_disparity(disparity, K, MOUNT.baseline_m, camera), repeats)
     model = TargetModel((np.ascontiguousarray(chelsea()[20:280, 110:370]),), (0.23, 0.23, 0.23))
     image = timing_image(model, K)
     for name in ("sift", "ncc"):
         detector = make_detector(name, model, K)
-        figures[f"{name}_ms"] = _median_ms(lambda: detector.detect(image), repeats)
+        figures[f"{name}_ms"] = median_ms(lambda: detector.detect(image), repeats)
     log.info("the Middlebury motorcycle pair")
     motorcycle = evaluate_motorcycle()
     figures["motorcycle_bad2"] = round(motorcycle["motorcycle_bad2"], 4)

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import logging
 import math
-import statistics
-import time
 
 import numpy as np
 
@@ -24,6 +22,7 @@ from offboard.planner import PlannerConfig, SearchPlanner
 from offboard.priors import HintBox, hints
 from offboard.time_model import TimeModel
 from offboard.voxel_grid import VoxelGrid
+from shared.timing import median_ms
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
 
@@ -56,16 +55,6 @@ def _decide(planner: SearchPlanner, occupancy: OccupancyGrid, pose: Pose2D):
     return planner.decide(pose, 0.0, 0.0, 0.0, occupancy, paths)
 
 
-def _median_ms(fn, repeats: int) -> float:
-    fn()  # warm-up: JIT compilation, caches
-    samples = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        samples.append((time.perf_counter() - start) * 1000.0)
-    return round(statistics.median(samples), 2)
-
-
 def _update(planner: SearchPlanner, occupancy: OccupancyGrid, pose: Pose2D) -> None:
     cam = MOUNT.camera_in_world(pose, 0.0, 0.0)
     depth = visible_depth(None, occupancy, cam, K, MOUNT.baseline_m, 16, planner.table.range_m[1])
@@ -79,9 +68,9 @@ def run(repeats: int = 15) -> dict:
     for resolution, key in ((0.05, "decision_ms"), (0.10, "decision_ms_10cm"), (0.025, "decision_ms_2_5cm")):
         log.info("planner at %g cm", resolution * 100)
         planner, occupancy = _scenario(resolution)
-        figures[key] = _median_ms(lambda: _decide(planner, occupancy, pose), repeats)
+        figures[key] = median_ms(lambda: _decide(planner, occupancy, pose), repeats)
         if resolution == 0.05:
-            figures["update_ms"] = _median_ms(lambda: _update(planner, occupancy, pose), repeats)
+            figures["update_ms"] = median_ms(lambda: _update(planner, occupancy, pose), repeats)
             figures["actions"] = planner.action_count
             figures["cubes"] = occupancy.grid.num_cubes
     return figures

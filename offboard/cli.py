@@ -13,27 +13,15 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from shared.arguments import floats
 from shared.transport import TransportConfig, add_transport_args, transport_from_args
 
 log = logging.getLogger("syt.offboard")
-
-
-def _floats(count: int, what: str):
-    def parse(text: str) -> tuple[float, ...]:
-        try:
-            values = tuple(float(v) for v in text.split(","))
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{what}: expected {count} comma-separated numbers, got {text!r}") from None
-        if len(values) != count or not all(math.isfinite(v) and v > 0 for v in values):
-            raise argparse.ArgumentTypeError(f"{what}: expected {count} positive comma-separated numbers, got {text!r}")
-        return values
-    return parse
 
 
 def _probability(text: str) -> float:
@@ -48,9 +36,9 @@ def _probability(text: str) -> float:
 def _add_search_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--target-picture", action="append", type=Path, required=True, metavar="PATH",
                         help="a picture of the target's textured face (repeatable)")
-    parser.add_argument("--target-size", type=_floats(3, "--target-size"), default=(0.23, 0.23, 0.23),
+    parser.add_argument("--target-size", type=floats(3, "--target-size", positive=True), default=(0.23, 0.23, 0.23),
                         metavar="X,Y,Z", help="target extents in metres; the picture covers the Y × Z face")
-    parser.add_argument("--room", type=_floats(3, "--room"), default=(9.0, 5.0, 2.5), metavar="X,Y,Z",
+    parser.add_argument("--room", type=floats(3, "--room", positive=True), default=(9.0, 5.0, 2.5), metavar="X,Y,Z",
                         help="the search region's size in metres, from the floor corner at the origin")
     parser.add_argument("--cost", type=int, choices=(1, 2, 3, 4), default=3, help="cost function (report §5.2.1)")
     parser.add_argument("--prior", action="append", default=[], metavar="KIND",
@@ -194,7 +182,7 @@ def _parser() -> argparse.ArgumentParser:
     search.set_defaults(func=_search)
     demo = sub.add_parser("demo", help="start a simulated robot and search with it (two processes, loopback)")
     demo.add_argument("--world", default="paper-lab")
-    demo.add_argument("--room", type=_floats(3, "--room"), default=(9.0, 5.0, 2.5), metavar="X,Y,Z")
+    demo.add_argument("--room", type=floats(3, "--room", positive=True), default=(9.0, 5.0, 2.5), metavar="X,Y,Z")
     demo.add_argument("--out", type=Path, default=Path("demo-out"), metavar="DIR")
     demo.add_argument("--spawn", action="store_true", help="also stream to a new Rerun viewer")
     demo.set_defaults(func=_demo)
@@ -205,7 +193,7 @@ def _parser() -> argparse.ArgumentParser:
     calibrate = sub.add_parser("calibrate-detector", help="measure a detector's detectability table in simulation")
     calibrate.add_argument("--detector", choices=("sift", "ncc"), default="sift")
     calibrate.add_argument("--target-picture", action="append", type=Path, required=True, metavar="PATH")
-    calibrate.add_argument("--target-size", type=_floats(3, "--target-size"), default=(0.23, 0.23, 0.23), metavar="X,Y,Z")
+    calibrate.add_argument("--target-size", type=floats(3, "--target-size", positive=True), default=(0.23, 0.23, 0.23), metavar="X,Y,Z")
     calibrate.add_argument("--samples", type=int, default=1, help="views per cell")
     calibrate.add_argument("--negatives", type=int, default=200, help="views without the target")
     calibrate.add_argument("--out", type=Path, required=True, metavar="FILE.json")

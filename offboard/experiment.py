@@ -18,7 +18,6 @@ and to measure the estimate's error and SPL's shortest path. The planner sees no
 from __future__ import annotations
 
 import argparse
-import csv
 import hashlib
 import json
 import logging

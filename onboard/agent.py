@@ -206,9 +206,10 @@ class Agent:
         def run() -> Callable[[], None]:
             try:
                 result = job()
-            except Exception as exc:
+            except Exception as exc:  # a device fault: answer it (exc is gone once this block ends)
                 log.exception("%s job failed", device)
-                return lambda: self._reply_error(query, command_id, "device", f"{type(exc).__name__}: {exc}")
+                text = f"{type(exc).__name__}: {exc}"
+                return lambda: self._reply_error(query, command_id, "device", text)
             return lambda: self._reply(query, result, arrays)
         if not self._workers[device].try_submit(run):
             raise CommandRefused("busy", f"the {device} is executing another command; send stop first")

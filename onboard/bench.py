@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import json
 import logging
-import statistics
-import time
 import uuid
 
 from onboard.config import OnboardConfig
 from onboard.sim.render import StereoRenderer
 from onboard.sim.world import load_world
 from shared import messages as m
+from shared.timing import median_ms
 from shared.geometry import Pose2D
 from shared.keys import RobotKeys
 from shared.launch import onboard_agent
@@ -25,22 +24,12 @@ from shared.transport import TransportConfig
 log = logging.getLogger(__name__)
 
 
-def _median_ms(fn, repeats: int) -> float:
-    fn()  # warm-up (JIT, caches, connections)
-    samples = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        samples.append((time.perf_counter() - start) * 1000.0)
-    return round(statistics.median(samples), 3)
-
-
 def _render_ms(config: OnboardConfig, repeats: int) -> float:
     world = load_world("paper-lab")
     renderer = StereoRenderer(world, config.camera.intrinsics(), config.camera.mount())
     poses = [Pose2D(x, y, h) for x, y, h in ((4.5, 0.6, 1.57), (2.0, 2.0, 0.0), (7.0, 3.0, 3.0), (4.0, 2.5, -1.0))]
     counter = iter(range(10**9))
-    return _median_ms(lambda: renderer.render(poses[next(counter) % len(poses)], 0.0, 0.0), repeats)
+    return median_ms(lambda: renderer.render(poses[next(counter) % len(poses)], 0.0, 0.0), repeats)
 
 
 def _roundtrips_ms(repeats: int) -> dict[str, float]:
@@ -53,8 +42,8 @@ def _roundtrips_ms(repeats: int) -> dict[str, float]:
             def ask(key: str, command, expected):
                 return lambda: request(session, key, command(uuid.uuid4().hex[:8]), expected, 10.0)
             return {
-                "capture_roundtrip_ms": _median_ms(ask(keys.capture, m.CaptureCommand, m.Capture), repeats),
-                "state_roundtrip_ms": _median_ms(ask(keys.state, m.StateRequest, m.StateReply), repeats * 10),
+                "capture_roundtrip_ms": median_ms(ask(keys.capture, m.CaptureCommand, m.Capture), repeats),
+                "state_roundtrip_ms": median_ms(ask(keys.state, m.StateRequest, m.StateReply), repeats * 10),
             }
 
 

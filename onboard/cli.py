@@ -17,29 +17,18 @@ import threading
 from pathlib import Path
 
 from onboard.config import OnboardConfig
+from shared.arguments import floats
 from shared.config import ConfigError, load_config
 from shared.transport import add_transport_args, transport_from_args
 
 log = logging.getLogger("syt.onboard")
 
 
-def _floats(count: int, what: str):
-    def parse(text: str) -> tuple[float, ...]:
-        try:
-            values = tuple(float(v) for v in text.split(","))
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{what}: expected {count} comma-separated numbers, got {text!r}") from None
-        if len(values) != count or not all(math.isfinite(v) for v in values):
-            raise argparse.ArgumentTypeError(f"{what}: expected {count} finite comma-separated numbers, got {text!r}")
-        return values
-    return parse
-
-
 def _add_world_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--world", help="bundled world name or world file (default: the config's, paper-lab)")
-    parser.add_argument("--start", type=_floats(3, "--start"), metavar="X,Y,HEADING_DEG",
+    parser.add_argument("--start", type=floats(3, "--start"), metavar="X,Y,HEADING_DEG",
                         help="override the world's robot start")
-    parser.add_argument("--target", type=_floats(4, "--target"), metavar="X,Y,Z,YAW_DEG",
+    parser.add_argument("--target", type=floats(4, "--target"), metavar="X,Y,Z,YAW_DEG",
                         help="override the world's target placement (bottom centre)")
 
 

@@ -1,7 +1,6 @@
 """The occupancy grid (eq. 5-8) on frames whose answer is known."""
 
 import math
-import time
 
 import numpy as np
 import pytest
