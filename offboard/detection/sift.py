@@ -81,7 +81,7 @@ class SiftDetector:
                  focus_max_face_px: float = 120.0, max_zoom: float = 2.0, focus_contrast_threshold: float = 0.02,
                  scale_step: float = 2**0.5, tilt: float = 2**0.5, features_per_view: int = 150,
                  max_aspect_change: float = 3.0, cost_repeats: int = 3) -> None:
-        self.model, self.intrinsics = model, intrinsics
+        self.model = model
         self.ratio, self.ransac_px = ratio, ransac_px
         self.min_inliers, self.confident_inliers = min_inliers, max(confident_inliers, min_inliers)
         self.min_face_px, self.max_aspect_change = min_face_px, max_aspect_change
