@@ -36,8 +36,9 @@ class LoopbackAgent:
     process: subprocess.Popen
     log_path: Path | None
 
-    def wait_ready(self, session: zenoh.Session, robot_id: str, timeout_s: float = 60.0) -> None:
-        """Wait for the agent's liveliness token; fail at once, with its log, if the process died."""
+    def wait_ready(self, session: zenoh.Session, robot_id: str, timeout_s: float = 300.0) -> None:
+        """Wait for the agent's liveliness token; fail at once, with its log, if the process died.
+        (Generous: on a fresh checkout the simulator compiles its kernels before it is ready.)"""
         key = RobotKeys(robot_id).agent_alive
         deadline = time.monotonic() + timeout_s
         while not any(r.ok is not None for r in session.liveliness().get(key, timeout=0.5)):

@@ -17,8 +17,8 @@ from offboard.belief import TargetBelief
 from offboard.detectability import DetectabilityTable
 from offboard.experiment import PAPER, Run, build_runs, make_row
 from offboard.experiment_report import COLUMNS, REPORT, append_row, conclusions, load_results, render, write_report
-from offboard.experiment_world import (Obstacle, Truth, load_facts, robot_starts, tables_hints, target_placements,
-                                       true_floor_map, viewpoint)
+from offboard.experiment_world import (Obstacle, Truth, load_facts, robot_starts, seeing_cells, tables_hints,
+                                       target_placements, true_floor_map, viewpoint)
 from offboard.occupancy import OccupancyGrid
 from offboard.planner import PlannerConfig, SearchPlanner
 from offboard.priors import HintBox, hints, load_hints
@@ -240,6 +240,14 @@ def test_the_oracle_drives_to_the_nearest_seeing_position_and_looks_at_the_targe
     assert look.tilt_rad < 0  # the target is below the camera
     with pytest.raises(ValueError):
         BASELINES["oracle"](BaselineContext())
+
+
+def test_a_tall_obstacle_hides_the_target_and_a_low_one_does_not():
+    def sees_from(box_top_m: float) -> bool:
+        truth = Truth((6.0, 4.0, 2.5), (Obstacle((2.5, 1.8, 0.0), (3.5, 2.0, box_top_m)),), (3.0, 3.5, 0.9), -90.0)
+        floor = true_floor_map(truth)
+        return bool(seeing_cells(truth, floor)[int(3.0 / 0.05), int(1.2 / 0.05)])  # 2.2 m straight ahead
+    assert sees_from(0.5) and not sees_from(1.5)
 
 
 def test_nothing_sees_a_target_facing_a_wall():

@@ -7,7 +7,8 @@
 - :func:`operating_range` and :class:`CostMeter`: the range and cost figures the detectors report.
 
 Corner order everywhere is that of the simulator's ``picture_corners_m``: top-left, top-right,
-bottom-right, bottom-left of the picture as a viewer facing it sees them.
+bottom-right, bottom-left of the picture as a viewer facing it sees them. Image coordinates are
+those of ``Intrinsics.project``: pixel centres at integers, so a face's outer edge lies on half pixels.
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ _REGISTRY = {
 
 @dataclass(frozen=True, eq=False)  # eq=False: corners_px is an array
 class Detection:
+    """The target's pictured face found in a left image."""
+
     detector: str  # "sift" | "ncc"
     box_px: tuple[float, float, float, float]  # x_min, y_min, x_max, y_max; may pass the border
     corners_px: np.ndarray  # (4, 2) projected picture corners, order as in the module docstring
@@ -157,10 +160,12 @@ class CostMeter:
         return float(np.median(self._times_ms)) if self._times_ms else math.nan
 
 
-def timing_image(intrinsics: Intrinsics) -> np.ndarray:
-    """A deterministic stand-in for a camera image without the target (most images of a search):
-    room-like texture at several scales everywhere, with about as many SIFT keypoints as a
-    rendered room (cost grows with them, so a plain image would flatter the detectors)."""
+def timing_image(model: TargetModel, intrinsics: Intrinsics, *, with_target: bool = True) -> np.ndarray:
+    """A deterministic stand-in for a camera image: room-like texture at several scales everywhere,
+    with about as many SIFT keypoints as a rendered room (cost grows with them, so a plain image
+    would flatter the detectors), and the model's first picture 80 px wide in the middle unless
+    ``with_target`` is false (the detectors time themselves without it: most images of a search
+    do not hold the target)."""
     rng = np.random.default_rng(0)
     w, h = intrinsics.width_px, intrinsics.height_px
     field = np.zeros((h, w), dtype=np.float32)
@@ -168,7 +173,14 @@ def timing_image(intrinsics: Intrinsics) -> np.ndarray:
         noise = rng.standard_normal((max(2, cells * h // w), cells)).astype(np.float32)
         field += weight * cv2.resize(noise, (w, h), interpolation=cv2.INTER_CUBIC)
     grey = np.clip(128.0 + 40.0 * field / field.std(), 0, 255).astype(np.uint8)
-    return np.repeat(grey[:, :, None], 3, axis=2)
+    image = np.repeat(grey[:, :, None], 3, axis=2)
+    if with_target:
+        face_w = min(80, w)
+        face_h = min(h, max(1, round(face_w * model.face_height_m / model.face_width_m)))
+        x0, y0 = (w - face_w) // 2, (h - face_h) // 2
+        image[y0:y0 + face_h, x0:x0 + face_w] = cv2.resize(model.pictures[0], (face_w, face_h),
+                                                            interpolation=cv2.INTER_AREA)
+    return image
 
 
 def to_grey(rgb: np.ndarray) -> np.ndarray:

@@ -66,7 +66,7 @@ class NccDetector:
         self._greys = tuple(to_grey(p) for p in model.pictures)
         self._coarse = tuple(tuple(self._coarse_template(grey, w) for w in self._widths) for grey in self._greys)
         self._meter = CostMeter()
-        image = timing_image(intrinsics)
+        image = timing_image(model, intrinsics, with_target=False)
         for _ in range(cost_repeats):
             self.detect(image)
         log.info("ncc: %d sizes %.0f-%.0f px, %.1f ms per image, range %.2f-%.2f m",

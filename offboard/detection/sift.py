@@ -95,7 +95,7 @@ class SiftDetector:
         self._models = tuple(_model_features(to_grey(p), model_sift, min_face_px, scale_step, tilt)
                              for p in model.pictures)
         self._meter = CostMeter()
-        image = timing_image(intrinsics)
+        image = timing_image(model, intrinsics, with_target=False)
         for _ in range(cost_repeats):
             self.detect(image)
         log.info("sift: %s model keypoints, %.1f ms per image, range %.2f-%.2f m",

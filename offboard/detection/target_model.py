@@ -55,11 +55,6 @@ class TargetModel:
     def face_height_m(self) -> float:
         return self.size_m[2]
 
-    @property
-    def largest_picture_px(self) -> int:
-        """Widest side of the best-resolved picture: how much detail the model holds."""
-        return max(max(p.shape[:2]) for p in self.pictures)
-
 
 def _check_picture(picture: np.ndarray, label: str) -> None:
     if picture.dtype != np.uint8 or picture.ndim != 3 or picture.shape[2] != 3:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import time
 
 from onboard.config import OnboardConfig
 from onboard.devices import Devices, StereoImages
@@ -45,6 +46,9 @@ def build_sim_devices(config: OnboardConfig, world: World) -> Devices:
     base = SimBase(world, config.base, clock, sim.odometry_noise, seed=sim.seed, step_s=sim.step_s)
     pantilt = SimPanTilt(config.pantilt, clock, step_s=sim.step_s)
     renderer = StereoRenderer(world, config.camera.intrinsics(), config.camera.mount())
+    started = time.monotonic()
+    renderer.render(world.start, 0.0, 0.0)  # compile (or load) the kernels before the agent says it is ready
+    log.info("renderer ready in %.1f s", time.monotonic() - started)
     camera = SimStereoCamera(renderer, base, pantilt, clock, config.timing)
     log.info("simulated robot in world %r at (%.2f, %.2f), %s clock", world.name, world.start.x_m,
              world.start.y_m, "real-time" if sim.realtime else "fast")
