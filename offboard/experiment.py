@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import itertools
 import json
 import logging
 import math
@@ -40,6 +41,7 @@ from offboard.baselines import BASELINES, BaselineContext
 from offboard.experiment_report import append_row, finished_keys, write_report
 from offboard.experiment_world import (Placement, Start, WorldFacts, load_facts, robot_starts, tables_hints,
                                        target_placements, viewpoint)
+from shared.arguments import floats
 
 log = logging.getLogger(__name__)
 
@@ -94,24 +96,23 @@ BASELINE_METHODS = tuple(BASELINES)
 
 
 def build_runs(spec: GridSpec) -> list[Run]:
+    """The grid in a fixed order (``--limit`` takes its head): per world, seed, start, target, prior, method."""
     runs = []
     for name in spec.worlds:
         world = load_facts(name)
         starts = list(spec.start_overrides) or robot_starts(world, spec.starts)
         targets = list(spec.target_overrides) or target_placements(world, spec.targets)
-        for seed in spec.seeds:
-            for start in starts:
-                for target in targets:
-                    for prior in spec.priors:
-                        for method in spec.methods:
-                            costs = spec.costs if method == "syt" else (None,)
-                            runs += [Run(method, name, start, target, c, prior, seed) for c in costs]
+        for seed, start, target, prior, method in itertools.product(spec.seeds, starts, targets, spec.priors,
+                                                                     spec.methods):
+            costs = spec.costs if method == "syt" else (None,)  # the cost function is SYT's alone
+            runs += [Run(method, name, start, target, c, prior, seed) for c in costs]
     return runs
 
 
 # --- results.csv rows ------------------------------------------------------------------------------
 
 def make_row(run: Run, world: WorldFacts, summary: dict | None, run_wall_s: float, error: str = "") -> dict:
+    """A results.csv row: the run, its summary (``None`` if it crashed), the estimate's error, SPL."""
     truth = world.truth(run.target)
     _, shortest = viewpoint(truth, run.start[:2])
     row = {**run.fields(), "key": run.key, "run_wall_s": round(run_wall_s, 2),
@@ -318,15 +319,6 @@ def _list(kind: type, allowed: tuple | None = None):
     return parse
 
 
-def _floats(count: int):
-    def parse(text: str) -> tuple[float, ...]:
-        values = _list(float)(text)
-        if len(values) != count:
-            raise argparse.ArgumentTypeError(f"expected {count} comma-separated numbers, got {text!r}")
-        return values
-    return parse
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("experiment-out"), metavar="DIR",
                         help="results.csv, report.md, plots and one folder per run; a rerun resumes")
@@ -341,9 +333,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"syt, {', '.join(BASELINE_METHODS)}")
     parser.add_argument("--starts", type=int, metavar="N", help="robot starts per world (derived from the world)")
     parser.add_argument("--targets", type=int, metavar="N", help="target placements per world (on its tables)")
-    parser.add_argument("--start", type=_floats(3), action="append", metavar="X,Y,HEADING_DEG",
+    parser.add_argument("--start", type=floats(3, "--start"), action="append", metavar="X,Y,HEADING_DEG",
                         help="use these robot starts instead (repeatable)")
-    parser.add_argument("--target", type=_floats(4), action="append", metavar="X,Y,Z,YAW_DEG",
+    parser.add_argument("--target", type=floats(4, "--target"), action="append", metavar="X,Y,Z,YAW_DEG",
                         help="use these target placements instead (repeatable)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N", help="runs at once")
     parser.add_argument("--budget-s", type=float, default=1800.0, metavar="SECONDS", help="robot-time budget K")

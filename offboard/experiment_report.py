@@ -129,29 +129,35 @@ def _comparisons(pairs: list[tuple[float | None, float | None]]) -> tuple[bool |
 
 
 def conclusions(t: Tables) -> list[Verdict]:
+    """The report's six conclusions, each checked on ``t`` (ours, or the report's own tables)."""
     u, k = t["uniform"], t["tables"]
-    both = (u, k)
+    return _knowledge_and_actions(u, k) + _two_stages(u, k) + _best(u, k)
+
+
+def _knowledge_and_actions(u: dict, k: dict) -> list[Verdict]:
     ok1, n1 = _comparisons([(k[m][c], u[m][c]) for m in METRICS for c in range(4)])
     spreads = []
-    for tab in both:
+    for tab in (u, k):
         a = [v for v in tab["actions"] if v is not None]
         spreads.append((max(a) - min(a)) / statistics.fmean(a) if len(a) == 4 and statistics.fmean(a) > 0 else None)
     ok2 = None if None in spreads else all(s <= SAME_ACTIONS for s in spreads)
-    moving = ("distance_m", "time_min")
-    ok3, n3 = _comparisons([(tab[m][c], tab[m][0]) for tab in both for m in moving for c in (1, 2, 3)])
-    ok4, n4 = _comparisons([(tab[m][c], tab[m][1]) for tab in both for m in moving for c in (2, 3)])
-    cells = {m: [tab[m][c] for tab in both for c in range(4)] for m in ("time_min", "distance_m")}
-    ok5 = None if any(v is None for vs in cells.values() for v in vs) else all(
-        k[m][2] == min(vs) for m, vs in cells.items())
-    ok6, n6 = _comparisons([(k["actions"][c], k["actions"][1]) for c in (0, 2, 3)])
     return [
         Verdict("Prior knowledge drastically accelerates the search (time, actions, distance).", ok1,
-                f"{n1}/12 cost×metric cells lower with knowledge; mean over costs: time {_fmt(_mean(u['time_min']))} → "
-                f"{_fmt(_mean(k['time_min']))} min, actions {_fmt(_mean(u['actions']))} → {_fmt(_mean(k['actions']))}, "
+                f"{n1}/12 cost×metric cells lower with knowledge; mean over costs: "
+                f"time {_fmt(_mean(u['time_min']))} → {_fmt(_mean(k['time_min']))} min, "
+                f"actions {_fmt(_mean(u['actions']))} → {_fmt(_mean(k['actions']))}, "
                 f"distance {_fmt(_mean(u['distance_m']))} → {_fmt(_mean(k['distance_m']))} m"),
         Verdict("The cost function has no significant effect on the number of actions.", ok2,
                 f"spread (max − min) / mean of the four costs' mean actions: no knowledge {_fmt(spreads[0])}, "
                 f"knowledge {_fmt(spreads[1])} (criterion ≤ {SAME_ACTIONS:g})"),
+    ]
+
+
+def _two_stages(u: dict, k: dict) -> list[Verdict]:
+    moving = ("distance_m", "time_min")
+    ok3, n3 = _comparisons([(tab[m][c], tab[m][0]) for tab in (u, k) for m in moving for c in (1, 2, 3)])
+    ok4, n4 = _comparisons([(tab[m][c], tab[m][1]) for tab in (u, k) for m in moving for c in (2, 3)])
+    return [
         Verdict("The two-stage search (costs 2-4) reduces distance and time against cost 1.", ok3,
                 f"{n3}/12 comparisons hold; distance cost 1 vs 2/3/4: no knowledge {_fmt(u['distance_m'][0])} vs "
                 f"{'/'.join(_fmt(v) for v in u['distance_m'][1:])} m, knowledge {_fmt(k['distance_m'][0])} vs "
@@ -160,10 +166,18 @@ def conclusions(t: Tables) -> list[Verdict]:
                 f"{n4}/8 comparisons against cost 2 hold; time cost 2 vs 3/4: no knowledge {_fmt(u['time_min'][1])} vs "
                 f"{_fmt(u['time_min'][2])}/{_fmt(u['time_min'][3])} min, knowledge {_fmt(k['time_min'][1])} vs "
                 f"{_fmt(k['time_min'][2])}/{_fmt(k['time_min'][3])} min"),
+    ]
+
+
+def _best(u: dict, k: dict) -> list[Verdict]:
+    cells = {m: [tab[m][c] for tab in (u, k) for c in range(4)] for m in ("time_min", "distance_m")}
+    known = {m: [v for v in vs if v is not None] for m, vs in cells.items()}
+    ok5 = None if any(None in vs for vs in cells.values()) else all(k[m][2] == min(vs) for m, vs in cells.items())
+    ok6, n6 = _comparisons([(k["actions"][c], k["actions"][1]) for c in (0, 2, 3)])
+    return [
         Verdict("Knowledge with cost 3 gives the best results (least time and distance of all eight cells).", ok5,
                 f"knowledge + cost 3: {_fmt(k['time_min'][2])} min, {_fmt(k['distance_m'][2])} m; least of all cells: "
-                f"{_fmt(min((v for v in cells['time_min'] if v is not None), default=None))} min, "
-                f"{_fmt(min((v for v in cells['distance_m'] if v is not None), default=None))} m"),
+                f"{_fmt(min(known['time_min'], default=None))} min, {_fmt(min(known['distance_m'], default=None))} m"),
         Verdict("The number of actions is best minimised by costs 1, 3 and 4 (checked with knowledge, where the "
                 "report's Table 3 supports it; in its Table 2 cost 1 needs the most).", ok6,
                 f"{n6}/3 of costs 1/3/4 need fewer actions than cost 2: "
@@ -283,9 +297,12 @@ def _wall_md(rows: list[dict]) -> list[str]:
     walls = [r["run_wall_s"] for r in rows if r["run_wall_s"] is not None]
     if not walls:
         return []
+    methods = dict.fromkeys(r["method"] for r in rows)
+    by_method = {m: _mean([r["run_wall_s"] for r in rows if r["method"] == m]) for m in methods}
     return ["## Wall time", "", f"{len(walls)} runs took {sum(walls) / 60:.1f} min of worker wall time in all "
             f"(mean {statistics.fmean(walls):.0f} s, median {statistics.median(walls):.0f} s, max {max(walls):.0f} s "
-            "per run, including the agent's start-up); with N jobs the sweep's wall time is about this sum / N.", ""]
+            "per run, including the agent's start-up); with N jobs the sweep's wall time is about this sum / N. "
+            "Mean per run: " + ", ".join(f"{m} {_fmt(w, 0)} s" for m, w in by_method.items()) + ".", ""]
 
 
 def render(rows: list[dict]) -> str:
