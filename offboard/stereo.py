@@ -31,6 +31,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from offboard.detection.detector import to_grey
 from shared.geometry import Intrinsics
 
 log = logging.getLogger("syt.offboard.stereo")
@@ -79,7 +80,7 @@ class StereoMatcher:
     def disparity(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """Rectified RGB (H,W,3 uint8) or grey pair -> float32 disparity in pixels (H,W) in the LEFT
         image; NaN where invalid (no texture, failed left-right check, occluded, speckle)."""
-        grey_left, grey_right = _grey(left), _grey(right)
+        grey_left, grey_right = to_grey(left), to_grey(right)
         if grey_left.shape != grey_right.shape:
             raise ValueError(f"left {grey_left.shape} and right {grey_right.shape} differ in size")
         cfg = self.config
@@ -117,17 +118,6 @@ def _create_matcher(cfg: StereoConfig) -> cv2.StereoMatcher:
         P1=cfg.sgbm_penalty_small * area, P2=cfg.sgbm_penalty_large * area, disp12MaxDiff=-1,
         preFilterCap=cfg.prefilter_cap, uniquenessRatio=cfg.uniqueness_ratio,
         speckleWindowSize=0, mode=cv2.StereoSGBM_MODE_SGBM_3WAY)
-
-
-def _grey(image: np.ndarray) -> np.ndarray:
-    image = np.asarray(image)
-    if image.dtype != np.uint8:
-        raise ValueError(f"stereo images must be uint8, not {image.dtype}")
-    if image.ndim == 3 and image.shape[2] == 3:
-        return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
-    if image.ndim == 2:
-        return np.ascontiguousarray(image)
-    raise ValueError(f"stereo images must be (H, W, 3) RGB or (H, W) grey, not {image.shape}")
 
 
 def _left_right_check(left_fx: np.ndarray, right_fx: np.ndarray, max_diff_px: float) -> np.ndarray:
