@@ -106,6 +106,13 @@ class RobotClient:
         cmd = m.SimTeleport(self._next_id(), m.PoseMsg(x_m, y_m, heading_deg))
         return self._request(self.keys.sim_teleport, cmd, m.SimTruth, 5.0).pose
 
+    def sim_reset(self, start: tuple[float, float, float], target: tuple[float, float, float, float],
+                  seed: int) -> m.PoseMsg:
+        """Simulator only (experiment sweeps): a new run — start (x, y, heading°), target (x, y, z of its
+        bottom face, yaw°), odometry-noise seed."""
+        cmd = m.SimReset(self._next_id(), m.PoseMsg(*start), tuple(target[:3]), target[3], seed)
+        return self._request(self.keys.sim_reset, cmd, m.SimTruth, 30.0).pose
+
     def latest_odometry(self, timeout_s: float = 2.0) -> m.Odometry:
         """The next odometry publication (a steady stream; only the newest matters)."""
         with self.session.declare_subscriber(self.keys.odometry, zenoh.handlers.RingChannel(1)) as sub:

@@ -37,9 +37,9 @@ log = logging.getLogger(__name__)
 _REQUEST_TYPES: dict[str, type] = {
     "move": m.MoveCommand, "stop": m.StopCommand, "look": m.LookCommand,
     "capture": m.CaptureCommand, "state": m.StateRequest, "info": m.InfoRequest,
-    "sim_truth": m.StateRequest, "sim_teleport": m.SimTeleport,
+    "sim_truth": m.StateRequest, "sim_teleport": m.SimTeleport, "sim_reset": m.SimReset,
 }
-_SIM_ONLY = ("sim_truth", "sim_teleport")
+_SIM_ONLY = ("sim_truth", "sim_teleport", "sim_reset")
 
 
 class CommandRefused(Exception):
@@ -301,6 +301,15 @@ class Agent:
         if self._workers["base"].busy:
             raise CommandRefused("busy", "cannot teleport while the base moves")
         problem = self._sim.teleport(cmd.pose.to_pose())
+        if problem:
+            raise CommandRefused("limit", problem)
+        self._on_sim_truth(query, m.StateRequest(cmd.command_id))
+
+    def _on_sim_reset(self, query: zenoh.Query, cmd: m.SimReset) -> None:
+        busy = [name for name, worker in self._workers.items() if worker.busy]
+        if busy:
+            raise CommandRefused("busy", f"cannot reset while {', '.join(busy)} works")
+        problem = self._sim.reset(cmd.start.to_pose(), cmd.target_m, cmd.target_yaw_deg, cmd.seed)
         if problem:
             raise CommandRefused("limit", problem)
         self._on_sim_truth(query, m.StateRequest(cmd.command_id))

@@ -75,15 +75,15 @@ def run_agent(argv: list[str]) -> int:
         log.error("%s", exc)
         return 2
     from onboard.agent import Agent
-    from onboard.sim.robot import build_sim_devices
+    from onboard.sim.robot import build_sim_robot
 
-    devices = build_sim_devices(config, world)
+    robot = build_sim_robot(config, world)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     session = transport.open()
     try:
-        agent = Agent(config, devices, session, transport.robot_id, sim=devices.base)
+        agent = Agent(config, robot.devices, session, transport.robot_id, sim=robot)
         agent.run(stop)
     finally:
         session.close()

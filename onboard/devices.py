@@ -99,6 +99,11 @@ class SimControl(Protocol):
     def teleport(self, pose: Pose2D) -> str | None:
         """Put the robot at ``pose`` (truth and odometry); the reason if it cannot stand there."""
 
+    def reset(self, start: Pose2D, target_m: tuple[float, float, float], target_yaw_deg: float,
+              seed: int) -> str | None:
+        """A new run in the same simulator: the target placed, the robot at ``start``, the head
+        centred, the noise reseeded; the reason if that cannot be."""
+
 
 @dataclass
 class Devices:

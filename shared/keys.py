@@ -10,6 +10,7 @@
 | ``syt/<id>/info``            | queryable   | InfoRequest → Info                   |
 | ``syt/<id>/sim/truth``       | queryable   | StateRequest → SimTruth (simulator)  |
 | ``syt/<id>/sim/teleport``    | queryable   | SimTeleport → SimTruth (simulator)   |
+| ``syt/<id>/sim/reset``       | queryable   | SimReset → SimTruth (simulator)      |
 | ``syt/<id>/odometry``        | publication | Odometry, steady rate, latest-only   |
 | ``syt/<id>/pantilt``         | publication | PanTiltState, steady rate            |
 | ``syt/<id>/heartbeat``       | publication | Heartbeat, from the planner          |
@@ -75,6 +76,10 @@ class RobotKeys:
     @property
     def sim_teleport(self) -> str:
         return self._key("sim/teleport")
+
+    @property
+    def sim_reset(self) -> str:
+        return self._key("sim/reset")
 
     @property
     def odometry(self) -> str:

@@ -297,8 +297,26 @@ class SimTeleport:
         _check_id(self.command_id)
 
 
+@dataclass(frozen=True)
+class SimReset:
+    """Simulator only, for experiment sweeps: start a new run in the same agent — the robot at
+    ``start`` (truth and odometry, head at pan 0, tilt 0), the target's bottom-face centre at
+    ``target_m`` facing ``target_yaw_deg``, the odometry noise drawn afresh from ``seed``."""
+
+    command_id: str
+    start: PoseMsg
+    target_m: tuple[float, float, float]
+    target_yaw_deg: float = field(metadata=bounds(-360.0, 360.0))
+    seed: int = field(default=0, metadata=bounds(0, 2**63 - 1))
+
+    def __post_init__(self) -> None:
+        _check_id(self.command_id)
+        if len(self.target_m) != 3 or not all(math.isfinite(v) and abs(v) <= 1.0e4 for v in self.target_m):
+            raise ValueError(f"target_m must be 3 finite coordinates in metres, got {self.target_m}")
+
+
 MESSAGE_TYPES: dict[str, type] = {cls.__name__: cls for cls in (
     MoveCommand, StopCommand, LookCommand, CaptureCommand, StateRequest, InfoRequest,
     ErrorReply, MoveResult, StopResult, LookResult, Capture, RobotState, StateReply, Odometry,
-    PanTiltState, Info, Heartbeat, SimTruth, SimTeleport,
+    PanTiltState, Info, Heartbeat, SimTruth, SimTeleport, SimReset,
 )}

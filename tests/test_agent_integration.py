@@ -172,6 +172,28 @@ def test_teleport_places_the_robot_and_refuses_walls(sim_agent):
         robot.sim_teleport(0.1, 0.1, 0.0)
 
 
+def test_reset_starts_a_new_run_in_the_same_agent(sim_agent):
+    _, robot = sim_agent
+    home = (1.7, 4.5, 0.75, -90.0)  # paper-lab's own placement
+    view = (4.5, 2.0, 90.0)  # facing the centre table's north side from the south
+    pose = robot.sim_reset(view, home, seed=5)
+    assert (pose.x_m, pose.y_m, pose.heading_deg) == pytest.approx(view)
+    assert robot.state().pose == pose and (robot.state().pan_deg, robot.state().tilt_deg) == (0.0, 0.0)
+    without = robot.capture().left
+    robot.sim_reset(view, (4.5, 2.5, 0.75, -90.0), seed=5)  # on the centre table, facing the robot
+    assert np.abs(robot.capture().left.astype(int) - without).max() > 50  # the target is in view now
+    driven = []
+    for _ in range(2):  # same seed, same noise: the run repeats exactly
+        robot.sim_reset(view, home, seed=5)
+        assert np.array_equal(robot.capture().left, without)
+        robot.move(turn_deg=-90.0, distance_m=1.0)
+        driven.append(robot.state().pose)
+    assert driven[0] == driven[1] and driven[0] != robot.sim_truth()
+    with pytest.raises(CommandError, match="overlaps obstacle"):
+        robot.sim_reset(view, (4.5, 2.5, 0.5, 0.0), seed=0)  # inside the table
+    assert robot.sim_truth() != pose  # a refused reset changes nothing
+
+
 PACED = ("--start", "0.5,1.0,0", "--realtime")
 
 

@@ -35,6 +35,7 @@ EXAMPLES = [
     m.Odometry(3, POSE, 0.2, 10.0, True, False, 1.0), m.PanTiltState(4, 1.0, 2.0, False, 1.0),
     m.Info("c14", "syt", "sim", BaseLimits(), PanTiltLimits(), CameraTiming(), INTR, MOUNT, 1000),
     m.Heartbeat("planner-1", 7), m.SimTruth("c15", POSE, 1.0), m.SimTeleport("c16", POSE),
+    m.SimReset("c17", POSE, (1.7, 4.5, 0.75), -90.0, 3),
 ]
 
 
@@ -85,13 +86,15 @@ BAD = [
     ("tuple length", _payload("MoveCommand", {"command_id": "x", "waypoint_m": [1.0]}), "waypoint_m"),
     ("nested", _payload("MoveResult", {"command_id": "x", "status": "done", "pose": {"x_m": 1.0, "y_m": 2.0},
                                        "distance_m": 0.0, "duration_s": 0.0, "robot_time_s": 0.0}), "pose.heading_deg"),
+    ("reset target", _payload("SimReset", {"command_id": "x", "start": {"x_m": 1.0, "y_m": 2.0, "heading_deg": 0.0},
+                                           "target_m": [1.0, 2.0], "target_yaw_deg": 0.0, "seed": 0}), "target_m"),
 ]
 
 
 @pytest.mark.parametrize("name,payload,field", BAD, ids=[b[0] for b in BAD])
 def test_bad_payloads_raise_one_protocol_error_naming_the_field(name, payload, field):
     with pytest.raises(ProtocolError) as err:
-        decode(payload, m.LookCommand, m.CaptureCommand, m.MoveCommand, m.MoveResult)
+        decode(payload, m.LookCommand, m.CaptureCommand, m.MoveCommand, m.MoveResult, m.SimReset)
     assert err.value.field.startswith(field)
     assert field in str(err.value)
 

@@ -12,13 +12,13 @@ import pytest
 
 from onboard.config import OnboardConfig, SimConfig
 from onboard.devices import Devices
-from onboard.sim.robot import build_sim_devices
+from onboard.sim.robot import build_sim_robot
 from onboard.sim.world import load_world
 
 
 def _sim(realtime: bool) -> Devices:
     config = dataclasses.replace(OnboardConfig(), sim=SimConfig(realtime=realtime))
-    return build_sim_devices(config, load_world("paper-lab").with_start(1.5, 2.5, 0.0))
+    return build_sim_robot(config, load_world("paper-lab").with_start(1.5, 2.5, 0.0)).devices
 
 
 BACKENDS = {"sim": _sim}

@@ -122,6 +122,10 @@ class SimBase:
             self._stalled = False
         return None
 
+    def reseed(self, seed: int) -> None:
+        """Draw the odometry errors afresh from ``seed`` (a new run repeats whatever came before)."""
+        self._rng = np.random.default_rng(seed)
+
     def collides(self, x_m: float, y_m: float) -> bool:
         """Does the base's footprint disc at (x, y) overlap a wall or a low obstacle?"""
         r = self.limits.radius_m

@@ -47,6 +47,11 @@ class SimPanTilt:
     def halt(self) -> None:
         self._halt.set()
 
+    def home(self) -> None:
+        """Pan 0, tilt 0 at once (the simulator's reset, not a motion)."""
+        with self._lock:
+            self._pan = self._tilt = 0.0
+
     def reading(self) -> PanTiltReading:
         with self._lock:
             return PanTiltReading(self._pan, self._tilt, self._moving)

@@ -1,4 +1,6 @@
-"""The simulated robot: a base, a pan-tilt unit and a stereo camera sharing one world and clock."""
+"""The simulated robot: a base, a pan-tilt unit and a stereo camera sharing one world and clock,
+and the simulator's own controls (the true pose, teleporting, a fresh run) for tests, calibration
+and experiment sweeps."""
 
 from __future__ import annotations
 
@@ -11,7 +13,8 @@ from onboard.sim.base import SimBase
 from onboard.sim.clock import SimClock
 from onboard.sim.pantilt import SimPanTilt
 from onboard.sim.render import StereoRenderer
-from onboard.sim.world import World
+from onboard.sim.world import World, WorldError
+from shared.geometry import Pose2D
 from shared.limits import CameraTiming
 
 log = logging.getLogger(__name__)
@@ -36,11 +39,51 @@ class SimStereoCamera:
         self._clock.advance(self._timing.capture_s)
         return StereoImages(frame.left, frame.right)
 
+    def show(self, world: World) -> None:
+        """Render ``world`` from now on (a new target placement)."""
+        self._renderer = StereoRenderer(world, self.intrinsics, self.mount)
+
     def close(self) -> None:
         pass
 
 
-def build_sim_devices(config: OnboardConfig, world: World) -> Devices:
+class SimRobot:
+    """The simulated devices and the :class:`onboard.devices.SimControl` over them."""
+
+    def __init__(self, world: World, devices: Devices, base: SimBase, pantilt: SimPanTilt,
+                 camera: SimStereoCamera) -> None:
+        self.world, self.devices = world, devices
+        self._base, self._pantilt, self._camera = base, pantilt, camera
+
+    @property
+    def true_pose(self) -> Pose2D:
+        return self._base.true_pose
+
+    def teleport(self, pose: Pose2D) -> str | None:
+        return self._base.teleport(pose)
+
+    def reset(self, start: Pose2D, target_m: tuple[float, float, float], target_yaw_deg: float,
+              seed: int) -> str | None:
+        """A new run: target moved, robot at ``start`` with its head centred, noise reseeded. The
+        reason if the placement is impossible (nothing changes then)."""
+        try:
+            world = self.world.with_target(*target_m, target_yaw_deg).with_start(
+                start.x_m, start.y_m, start.heading_rad)
+        except WorldError as exc:
+            return str(exc)
+        problem = self._base.teleport(start)
+        if problem:
+            return problem
+        self._base.reseed(seed)
+        self._pantilt.home()
+        self._camera.show(world)
+        self.world = world
+        log.info("new run: start (%.2f, %.2f), target at (%.2f, %.2f, %.2f) facing %.0f°, seed %d",
+                 start.x_m, start.y_m, *target_m, target_yaw_deg, seed)
+        return None
+
+
+def build_sim_robot(config: OnboardConfig, world: World) -> SimRobot:
     sim = config.sim
     clock = SimClock(realtime=sim.realtime)
     base = SimBase(world, config.base, clock, sim.odometry_noise, seed=sim.seed, step_s=sim.step_s)
@@ -52,4 +95,4 @@ def build_sim_devices(config: OnboardConfig, world: World) -> Devices:
     camera = SimStereoCamera(renderer, base, pantilt, clock, config.timing)
     log.info("simulated robot in world %r at (%.2f, %.2f), %s clock", world.name, world.start.x_m,
              world.start.y_m, "real-time" if sim.realtime else "fast")
-    return Devices("sim", clock, base, pantilt, camera)
+    return SimRobot(world, Devices("sim", clock, base, pantilt, camera), base, pantilt, camera)
