@@ -38,6 +38,8 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
                         help="a picture of the target's textured face (repeatable)")
     parser.add_argument("--target-size", type=floats(3, "--target-size", positive=True), default=(0.23, 0.23, 0.23),
                         metavar="X,Y,Z", help="target extents in metres; the picture covers the Y × Z face")
+    parser.add_argument("--target-sides", type=int, choices=(1, 4), default=1,
+                        help="pictured vertical faces: 1, or 4 (seen from any direction, as the report assumes)")
     parser.add_argument("--room", type=floats(3, "--room", positive=True), default=(9.0, 5.0, 2.5), metavar="X,Y,Z",
                         help="the search region's size in metres, from the floor corner at the origin")
     parser.add_argument("--cost", type=int, choices=(1, 2, 3, 4), default=3, help="cost function (report §5.2.1)")
@@ -58,7 +60,8 @@ def _search(args: argparse.Namespace) -> int:
     from offboard.search_run import SearchRequest, run_search
 
     request = SearchRequest(
-        pictures=tuple(args.target_picture), target_size_m=args.target_size, room_m=args.room, cost=args.cost,
+        pictures=tuple(args.target_picture), target_size_m=args.target_size, target_sides=args.target_sides,
+        room_m=args.room, cost=args.cost,
         priors=tuple(args.prior) or ("uniform",), budget_s=args.budget_s, move_threshold=args.move_threshold,
         detector=args.detector, detectability=tuple(args.detectability), config_path=args.config, out_dir=args.out,
         spawn=args.spawn, viewer_url=args.connect_viewer)
@@ -81,6 +84,7 @@ def _tour(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
+    from offboard.experiment_world import load_facts
     from offboard.search_run import SearchRequest, run_search
     from shared.launch import onboard_agent
 
@@ -93,8 +97,10 @@ def _demo(args: argparse.Namespace) -> int:
         transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
         with transport.open() as session:
             agent.wait_ready(session, "syt")
-        request = SearchRequest(pictures=(picture,), target_size_m=(0.23, 0.23, 0.23), room_m=args.room,
-                                cost=3, priors=("uniform",), out_dir=out, spawn=args.spawn)
+        world = load_facts(args.world)  # the demo is the experimenter: it knows what the target looks like
+        request = SearchRequest(pictures=(picture,), target_size_m=world.target_size_m,
+                                target_sides=world.target_sides, room_m=args.room, cost=3, priors=("uniform",),
+                                out_dir=out, spawn=args.spawn)
         summary = run_search(transport, request)
     sys.stdout.write(
         f"\nsearch {'found the target' if summary['found'] else 'ended: ' + summary['status']} in "

@@ -48,6 +48,11 @@ class Truth:
     target_center_m: Vec3
     target_yaw_deg: float  # the direction its picture faces, 0 = +x, counter-clockwise
     target_depth_m: float = 0.23  # the picture is half this in front of the centre
+    target_sides: int = 1  # pictured vertical faces: 1, or 4 (yaw and every quarter turn from it)
+
+    def face_normals(self) -> list[np.ndarray]:
+        yaws = [math.radians(self.target_yaw_deg + 90.0 * k) for k in range(self.target_sides)]
+        return [np.array([math.cos(yaw), math.sin(yaw)]) for yaw in yaws]
 
 
 @dataclass(frozen=True)
@@ -99,10 +104,15 @@ def _segments_hit_box(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.nda
 
 
 def seeing_cells(truth: Truth, floor: FloorMap, criteria: SeeingCriteria = SeeingCriteria()) -> np.ndarray:
-    """Free floor cells from which the camera sees the target's picture (bool, the floor map's shape)."""
+    """Free floor cells from which the camera sees one of the target's pictures (bool, the floor map's shape)."""
+    seen = np.zeros(floor.blocked.shape, bool)
+    for normal in truth.face_normals():
+        seen |= _seeing_face(truth, floor, criteria, normal)
+    return seen
+
+
+def _seeing_face(truth: Truth, floor: FloorMap, criteria: SeeingCriteria, normal: np.ndarray) -> np.ndarray:
     x, y = _cell_centres(truth.room_m, floor.resolution_m)
-    yaw = math.radians(truth.target_yaw_deg)
-    normal = np.array([math.cos(yaw), math.sin(yaw)])
     face = np.array(truth.target_center_m[:2]) + normal * truth.target_depth_m / 2
     dx, dy = x - face[0], y - face[1]
     dist = np.hypot(dx, dy)
@@ -152,6 +162,7 @@ class WorldFacts:
     target_picture: str
     target: Placement  # the world's own
     start: Start
+    target_sides: int = 1
 
     def tables(self) -> tuple[Box, ...]:
         return tuple(b for b in self.obstacles if b.kind in TABLE_KINDS)
@@ -160,7 +171,7 @@ class WorldFacts:
         """The real room with the target placed (``target``: its bottom centre and yaw)."""
         x, y, z, yaw = target
         return Truth(self.room_m, tuple(Obstacle(b.min_m, b.max_m) for b in self.obstacles),
-                     (x, y, z + self.target_size_m[2] / 2), yaw, self.target_size_m[0])
+                     (x, y, z + self.target_size_m[2] / 2), yaw, self.target_size_m[0], self.target_sides)
 
 
 def world_file(name_or_path: str) -> Path:
@@ -177,7 +188,7 @@ def load_facts(name_or_path: str) -> WorldFacts:
     robot, target = data["robot"], data["target"]
     return WorldFacts(data.get("name", path.stem), path, tuple(data["room"]["size"]), boxes, tuple(target["size"]),
                       target.get("picture", "target"), (*target["position"], float(target.get("yaw_deg", 0.0))),
-                      (*robot["start"], float(robot.get("heading_deg", 0.0))))
+                      (*robot["start"], float(robot.get("heading_deg", 0.0))), int(target.get("sides", 1)))
 
 
 # --- scenarios: where the robot starts, where the target is, what the planner is told ---------------

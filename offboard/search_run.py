@@ -33,6 +33,7 @@ class SearchRequest:
     pictures: tuple[Path, ...]
     target_size_m: tuple[float, float, float]
     room_m: tuple[float, float, float]
+    target_sides: int = 1  # pictured vertical faces: 1, or 4 (then it faces every camera: no facing to track)
     cost: int = 3
     priors: tuple[str, ...] = ("uniform",)
     budget_s: float = 1800.0
@@ -50,7 +51,8 @@ def search_config(request: SearchRequest) -> SearchConfig:
     base = load_config(SearchConfig, request.config_path)
     planner = dataclasses.replace(base.planner, cost_function=request.cost, budget_s=request.budget_s,
                                   **({} if request.move_threshold is None else {"move_threshold": request.move_threshold}))
-    return dataclasses.replace(base, room_m=request.room_m, detector=request.detector, planner=planner)
+    facing = {"facing_sectors": 1} if request.target_sides == 4 else {}
+    return dataclasses.replace(base, room_m=request.room_m, detector=request.detector, planner=planner, **facing)
 
 
 def detectability_table(name: str, detector: Detector, files: dict[str, Path]) -> DetectabilityTable:
@@ -89,8 +91,10 @@ def dynamic_priors(specs: tuple[str, ...], grid: VoxelGrid, model: TargetModel) 
     return made
 
 
-def run_search(transport: TransportConfig, request: SearchRequest, policy=None) -> dict:
-    """Run one search; ``policy`` (a factory taking the SearchPlanner) replaces the SYT decisions."""
+def run_search(transport: TransportConfig, request: SearchRequest, policy=None, detector_cache: dict | None = None) -> dict:
+    """Run one search; ``policy`` (a factory taking the SearchPlanner) replaces the SYT decisions.
+    ``detector_cache`` keeps the detectors (and their tables) for later searches of the same target
+    with the same camera: building a SIFT model takes seconds."""
     out = request.out_dir
     out.mkdir(parents=True, exist_ok=True)
     file_log = logging.FileHandler(out / "search.log", mode="w")
@@ -107,7 +111,12 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None) 
         model = TargetModel.from_files(request.pictures, request.target_size_m)
         with transport.open() as session, RobotClient(session, transport.robot_id) as robot:
             info = robot.wait_for_robot()
-            detectors = build_detectors(request, model, info.intrinsics.to_intrinsics())
+            intrinsics = info.intrinsics.to_intrinsics()
+            cache = {} if detector_cache is None else detector_cache
+            key = (request.detector, request.pictures, request.target_size_m, request.detectability, intrinsics)
+            if key not in cache:
+                cache[key] = build_detectors(request, model, intrinsics)
+            detectors = cache[key]
             grid = VoxelGrid(config.room_m, config.resolution_m)
             static = [p for p in request.priors if p.split(":")[0] in ("uniform", "hints", "last-seen")]
             search = Search(robot, config, detectors, build_prior(grid, static),

@@ -4,6 +4,7 @@ OpenCV block matching and SIFT work on what it draws."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -203,6 +204,25 @@ def test_sift_finds_the_target_picture(lab, lab_renderer, distance_m):
     centre = cv2.perspectiveTransform(np.float32([[[(w - 1) / 2, (h - 1) / 2]]]), homography)[0, 0]
     expected = project(placed.start, tilt, face)
     assert np.linalg.norm(centre - expected) < 3.0
+
+
+@pytest.mark.parametrize("sides", [1, 4])
+def test_a_target_with_four_sides_is_recognised_from_every_direction(tmp_path, sides):
+    from offboard.detection import TargetModel, make_detector
+
+    world = room_world(tmp_path, target_at=(3.0, 2.0, 0.8, 30.0))
+    world = replace(world, target=replace(world.target, sides=sides))
+    renderer = StereoRenderer(world, K, MOUNT)
+    picture = load_picture(world.target.picture, world.base_dir)
+    sift = make_detector("sift", TargetModel((picture,), world.target.size_m), K)
+    found = []
+    for turn in (0.0, 90.0, 180.0, 270.0):  # the picture's own side first, then its other sides
+        facing = np.array([math.cos(math.radians(30.0 + turn)), math.sin(math.radians(30.0 + turn))])
+        xy = world.target.center_m()[:2] + 1.5 * facing
+        pose = Pose2D(xy[0], xy[1], math.atan2(-facing[1], -facing[0]))
+        detection = sift.detect(renderer.render(pose, 0.0, math.radians(-10.0)).left)
+        found.append(detection is not None and abs(detection.center_px[0] - K.cx_px) < 40)  # left camera: ~20 px off
+    assert found == ([True] * 4 if sides == 4 else [True, False, False, False])
 
 
 def target_pixels(world: World, camera: RigidTransform, depth: np.ndarray) -> np.ndarray:

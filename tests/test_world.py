@@ -120,6 +120,7 @@ def test_a_minimal_valid_world_and_its_defaults(tmp_path):
         (edit("size = [6.0, 4.0, 2.5]", "size = [nan, 4.0, 2.5]"), "room.size: must be finite"),
         (edit("position = [2.5, 2.5, 0.75]", "position = [2.5, inf, 0.75]"), "target.position"),
         (edit("yaw_deg = -90", 'yaw_deg = "south"'), "target.yaw_deg"),
+        (edit("yaw_deg = -90", "yaw_deg = -90\nsides = 2"), "target.sides: must be 1 or 4"),
         (edit("size = [0.2, 0.2, 0.2]", "size = [0.2, 0.0, 0.2]"), "target.size"),
         (edit("size = [6.0, 4.0, 2.5]", "size = [6.0, -4.0, 2.5]"), "room.size"),
         (edit("max = [3.0, 3.0, 0.75]", "max = [3.0, 2.0, 0.75]"), "obstacle[0].max: max must exceed min"),

@@ -1,7 +1,7 @@
 """Stereo renderer of a ``World``: a numba ray caster producing a rectified pair plus true depth.
 
 The scene is the room (a box seen from inside) and a list of oriented boxes: the obstacles
-(yaw 0), the target (yawed, its picture on the face its yaw points to) and the posters (5 mm thin
+(yaw 0), the target (yawed, its picture on the face its yaw points to, or on all four sides) and the posters (5 mm thin
 boxes, picture on the front). Each pixel casts one ray, keeps the nearest hit and samples the hit
 face's texture with trilinear, anisotropic mip-mapping driven by the exact screen-space derivatives
 of the face coordinates, so distant and slanted textures do not alias (aliasing breaks both SIFT and
@@ -33,6 +33,7 @@ _AMBIENT = 0.5
 _LIGHT_GAIN = 0.5
 _LIGHT_FALLOFF = 0.04  # 1 / (1 + k d^2): mild, the room is small
 _PICTURE_FACE = 1  # face index 2 * axis + (normal > 0): the local +x face carries the picture
+_VERTICAL_FACES = (0, 1, 2, 3)  # ±x, ±y: a picture on each reads left to right from outside
 
 
 @dataclass(frozen=True)
@@ -105,7 +106,8 @@ class _Scene:
             self._boxes.append(((lo + hi) / 2, (hi - lo) / 2, 0.0, [mat] * 6))
         t = self.world.target
         faces = [self._texture(textures.default_texture("target"))] * 6
-        faces[_PICTURE_FACE] = self._picture(t.picture)
+        for face in (_PICTURE_FACE,) if t.sides == 1 else _VERTICAL_FACES:
+            faces[face] = self._picture(t.picture)
         self._boxes.append((t.center_m(), np.array(t.size_m) / 2, math.radians(t.yaw_deg), faces))
         for p in self.world.posters:
             faces = [self._texture(textures.default_texture("poster"))] * 6

@@ -19,6 +19,8 @@ World files are TOML (a contract other tools write; ``onboard/sim/worlds`` bundl
     size = [0.23, 0.23, 0.23]     # box extents along x, y, z before yaw, metres
     position = [1.6, 3.6, 0.75]   # centre of the target's bottom face
     yaw_deg = -90                 # optional (default 0): direction its picture faces, 0 = +x, CCW
+    sides = 1                     # optional (default 1): pictured sides, 1 (the face yaw points to)
+                                  # or 4 (every vertical face: recognisable from any direction)
 
     [robot]
     start = [4.5, 0.6]            # x, y
@@ -99,6 +101,7 @@ class Target:
     size_m: Vec3
     position_m: Vec3  # centre of the bottom face
     yaw_deg: float
+    sides: int = 1  # pictured vertical faces: 1 (the one yaw points to) or 4
 
     def center_m(self) -> np.ndarray:
         return np.array(self.position_m) + np.array([0.0, 0.0, self.size_m[2] / 2.0])
@@ -211,7 +214,7 @@ def _resolve(path_or_name: str | Path) -> Path:
 _TOP_KEYS = ({"name", "room", "target", "robot"}, {"obstacle", "poster"})
 _ROOM_KEYS = ({"size"}, {"texture", "floor_texture", "ceiling_texture"})
 _OBSTACLE_KEYS = ({"name", "min", "max"}, {"kind", "texture"})
-_TARGET_KEYS = ({"size", "position"}, {"picture", "yaw_deg"})
+_TARGET_KEYS = ({"size", "position"}, {"picture", "yaw_deg", "sides"})
 _ROBOT_KEYS = ({"start"}, {"heading_deg"})
 _POSTER_KEYS = ({"name", "picture", "center", "size"}, {"yaw_deg"})
 
@@ -233,6 +236,7 @@ def parse_world(data: dict[str, Any], base_dir: Path, *,
         _vector(target_t["size"], "target.size", 3, positive=True),
         _vector(target_t["position"], "target.position", 3),
         _number(target_t.get("yaw_deg", 0.0), "target.yaw_deg"),
+        _sides(target_t.get("sides", 1)),
     )
     start_xy = _vector(robot_t["start"], "robot.start", 2)
     heading = math.radians(_number(robot_t.get("heading_deg", 0.0), "robot.heading_deg"))
@@ -309,6 +313,12 @@ def _number(value: Any, key: str) -> float:
     if not math.isfinite(value):
         raise WorldError(f"{key}: must be finite, got {value!r}")
     return float(value)
+
+
+def _sides(value: Any) -> int:
+    if isinstance(value, bool) or value not in (1, 4):
+        raise WorldError(f"target.sides: must be 1 or 4 (pictured vertical faces), got {value!r}")
+    return int(value)
 
 
 def _check_numbers(key: str, values: tuple[Any, ...]) -> None:
