@@ -4,10 +4,14 @@ The grid is worlds × robot starts × target placements × cost functions × pri
 (``syt`` and the baselines of :mod:`offboard.baselines`, which ignore the cost function and so run
 once per start × target × prior). ``--preset paper`` is the report's 160 runs on ``paper-lab``.
 
-Each run is its own worker process (``python -m offboard.experiment SPEC.json``) that starts its own
-onboard agent on a fresh loopback port and runs :func:`offboard.search_run.run_search`; ``--jobs``
-workers run at once. Every finished run appends a row to ``results.csv`` at once, so an interrupted
-sweep resumes where it stopped (rows are keyed by the run; failed runs are tried again).
+``--jobs`` worker processes (``python -m offboard.experiment --serve``) run at once, each with its own
+onboard agent on its own loopback port. A worker takes run after run: it resets its simulated robot
+for the run (``sim/reset``: the run's start, target placement and noise seed, so a run gives the same
+numbers whichever worker runs it, in whatever order) and runs :func:`offboard.search_run.run_search`
+with a fresh planner; a run that fails gets the worker a fresh agent. Every finished run appends a
+row to ``results.csv`` at once, so an interrupted sweep resumes where it stopped (rows are keyed by
+the run; failed runs are tried again). Logs: ``runs/<run>/search.log`` per run,
+``workers/worker-<k>/{worker,onboard}.log`` per worker.
 
 The harness is the experimenter: it reads the world file (:mod:`offboard.experiment_world`; offboard
 code never imports the simulator) to place the robot and the target, to write the ``tables`` prior,
@@ -18,12 +22,15 @@ and to measure the estimate's error and SPL's shortest path. The planner sees no
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import itertools
 import json
 import logging
 import math
 import os
+import queue
+import select
 import signal
 import subprocess
 import sys
@@ -129,7 +136,7 @@ def make_row(run: Run, world: WorldFacts, summary: dict | None, run_wall_s: floa
     return {**row, "estimate_error_m": "" if err is None else round(err, 3), "success": success, "spl": round(spl, 4)}
 
 
-# --- one run (in its own worker process) -----------------------------------------------------------
+# --- the workers: long-lived processes, each with its own simulated robot -------------------------
 
 @dataclass(frozen=True)
 class WorkerSpec:
@@ -141,34 +148,77 @@ class WorkerSpec:
     out_dir: str
 
 
-def run_one(spec: WorkerSpec) -> dict:
-    """Start the run's agent, search, stop the agent; the summary is also in ``out_dir/summary.json``."""
-    from offboard.search_run import SearchRequest, run_search
-    from shared.launch import onboard_agent
-    from shared.transport import TransportConfig
+class _RunWorker:
+    """The worker side (``python -m offboard.experiment --serve``): one onboard agent, kept for run
+    after run in the same world and reset between them (``sim/reset``: start, target placement and
+    noise seed; the planner starts afresh each run), and the detectors, built once. That saves the
+    agent's and the planner's start-up, several seconds a run."""
 
-    run = Run(**{**spec.run, "start": tuple(spec.run["start"]), "target": tuple(spec.run["target"])})
-    world = load_facts(spec.world_path)
-    out = Path(spec.out_dir)
-    agent_args = ["--backend", "sim", "--world", spec.world_path, "--start", _fmt(run.start),
-                  "--target", _fmt(run.target), "--seed", str(run.seed)]
-    policy = None
-    if run.method != "syt":
-        policy = BASELINES[run.method](BaselineContext(seed=run.seed, truth=world.truth(run.target)))
-    with onboard_agent(agent_args, out / "onboard.log") as agent:
-        transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
-        with transport.open() as session:
-            agent.wait_ready(session, "syt")
-        request = SearchRequest(pictures=(Path(spec.picture),), target_size_m=world.target_size_m, room_m=world.room_m,
-                                cost=run.cost or 3, priors=(spec.prior_spec,), budget_s=spec.budget_s, out_dir=out,
-                                record=False)
-        return run_search(transport, request, policy)
+    def __init__(self, stack: contextlib.ExitStack, log_dir: Path):
+        self._stack, self._log_dir = stack, log_dir
+        self._agent_world: str | None = None
+        self._agent_stack: contextlib.ExitStack | None = None
+        self._transport = None
+        self._detectors: dict = {}
+
+    def run(self, spec: WorkerSpec) -> dict:
+        """Reset the robot for the run, search, write ``out_dir/summary.json``; the summary."""
+        from offboard.robot_client import RobotClient
+        from offboard.search_run import SearchRequest, run_search
+
+        run = Run(**{**spec.run, "start": tuple(spec.run["start"]), "target": tuple(spec.run["target"])})
+        world = load_facts(spec.world_path)
+        transport = self._agent(spec.world_path)
+        with transport.open() as session, RobotClient(session, "syt") as robot:
+            robot.sim_reset(run.start, run.target, run.seed)
+        policy = None
+        if run.method != "syt":
+            policy = BASELINES[run.method](BaselineContext(seed=run.seed, truth=world.truth(run.target)))
+        request = SearchRequest(pictures=(Path(spec.picture),), target_size_m=world.target_size_m,
+                                target_sides=world.target_sides, room_m=world.room_m,
+                                cost=run.cost or 3, priors=(spec.prior_spec,), budget_s=spec.budget_s,
+                                out_dir=Path(spec.out_dir), record=False)
+        return run_search(transport, request, policy, self._detectors)
+
+    def restart(self) -> None:
+        """After a failed run: a fresh agent for the next one (its state is not to be trusted)."""
+        if self._agent_stack is not None:
+            self._agent_stack.close()
+        self._agent_world = self._agent_stack = None
+
+    def _agent(self, world_path: str):
+        from shared.launch import onboard_agent
+        from shared.transport import TransportConfig
+
+        if self._agent_world != world_path:
+            self.restart()
+            stack = self._stack.enter_context(contextlib.ExitStack())
+            agent = stack.enter_context(onboard_agent(["--backend", "sim", "--world", world_path],
+                                                      self._log_dir / "onboard.log"))
+            self._transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
+            with self._transport.open() as session:
+                agent.wait_ready(session, "syt")
+            self._agent_world, self._agent_stack = world_path, stack
+        return self._transport
 
 
-def _worker_main(argv: list[str]) -> int:
+def _serve(log_dir: Path) -> int:
+    """The worker's loop: a spec path per line on stdin; per run, one line on stdout: ``ok`` or
+    ``error: ...``. Ends at end of input."""
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    logging.getLogger().handlers[0].setLevel(logging.WARNING)  # search.log keeps the details
-    run_one(WorkerSpec(**json.loads(Path(argv[0]).read_text())))
+    logging.getLogger().handlers[0].setLevel(logging.WARNING)  # each run's search.log keeps the details
+    with contextlib.ExitStack() as stack:
+        worker = _RunWorker(stack, log_dir)
+        for line in sys.stdin:
+            try:
+                worker.run(WorkerSpec(**json.loads(Path(line.strip()).read_text())))
+                answer = "ok"
+            except Exception as exc:  # the run failed, not the worker: report it, start the next afresh
+                log.exception("run %s failed", line.strip())
+                answer = f"error: {type(exc).__name__}: {exc}".replace("\n", " ")
+                worker.restart()
+            sys.stdout.write(answer + "\n")
+            sys.stdout.flush()
     return 0
 
 
@@ -196,37 +246,92 @@ class Progress:
         return math.inf if finished == 0 else (time.monotonic() - self.started) / finished * left
 
 
-class _Workers:
-    """Worker processes in their own process groups (each with its agent): stopped together on Ctrl-C."""
+class _WorkerProcess:
+    """The sweep's handle on one worker process (in its own process group, with its agent)."""
 
-    def __init__(self, jobs: int):
-        self.lock, self.running, self.stopping = threading.Lock(), set(), False
+    def __init__(self, index: int, log_dir: Path, env: dict):
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.log_path = log_dir / "worker.log"
+        self._log = self.log_path.open("a")
+        self.proc = subprocess.Popen([sys.executable, "-m", "offboard.experiment", "--serve", str(log_dir)],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, text=True,
+                                     start_new_session=True, env=env)
+
+    def run(self, spec_path: Path, timeout_s: float) -> str:
+        """``ok``, ``error: ...``, ``timeout`` or ``died: ...`` (then this worker is finished)."""
+        try:
+            self.proc.stdin.write(f"{spec_path}\n")
+            self.proc.stdin.flush()
+        except BrokenPipeError:
+            return self._died()
+        ready, _, _ = select.select([self.proc.stdout], [], [], timeout_s)
+        if not ready:
+            self.kill()
+            return "timeout"
+        answer = self.proc.stdout.readline().strip()
+        return answer or self._died()
+
+    def _died(self) -> str:
+        self.proc.wait()
+        tail = self.log_path.read_text().strip().splitlines()[-1:] or ["no output"]
+        return f"died: exit {self.proc.returncode}: {tail[0]}"
+
+    @property
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def kill(self, sig: int = signal.SIGKILL) -> None:
+        if self.alive:
+            os.killpg(self.proc.pid, sig)
+        self.proc.wait()
+
+    def close(self) -> None:
+        """End of input: the worker stops its agent and exits."""
+        try:
+            self.proc.stdin.close()
+            self.proc.wait(timeout=30)
+        except (subprocess.TimeoutExpired, BrokenPipeError):
+            self.kill()
+        self._log.close()
+
+
+class _Workers:
+    """``jobs`` long-lived worker processes, each lent to one run at a time; stopped together on Ctrl-C."""
+
+    def __init__(self, jobs: int, log_dir: Path):
+        self.lock, self.stopping = threading.Lock(), False
         # the runs share the cores: one numba thread per worker when there are as many workers as cores
         threads = str(max(1, (os.cpu_count() or 1) // max(jobs, 1)))
         self.env = {**os.environ, "NUMBA_NUM_THREADS": threads, "OMP_NUM_THREADS": threads}
+        self.log_dir = log_dir
+        self.idle: queue.Queue[int] = queue.Queue()
+        for index in range(jobs):
+            self.idle.put(index)
+        self.processes: dict[int, _WorkerProcess] = {}
 
-    def run(self, cmd: list[str], log_path: Path, timeout_s: float) -> int | None:
-        with log_path.open("w") as log_file, self.lock:
-            if self.stopping:
-                return None
-            proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, start_new_session=True,
-                                    env=self.env)
-            self.running.add(proc)
+    def run(self, spec_path: Path, timeout_s: float) -> str | None:
+        """The worker's answer for this run (see :meth:`_WorkerProcess.run`); None if the sweep stops."""
+        index = self.idle.get()
         try:
-            return proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-            return -1
-        finally:
             with self.lock:
-                self.running.discard(proc)
+                if self.stopping:
+                    return None
+                process = self.processes.get(index)
+                if process is None or not process.alive:
+                    process = self.processes[index] = _WorkerProcess(index, self.log_dir / f"worker-{index}", self.env)
+            return process.run(spec_path, timeout_s)
+        finally:
+            self.idle.put(index)
+
+    def close(self) -> None:
+        for process in self.processes.values():
+            process.close()
 
     def stop(self) -> None:
         with self.lock:
             self.stopping = True
-            for proc in self.running:
-                os.killpg(proc.pid, signal.SIGTERM)  # the worker and its agent (which stops its base on SIGTERM)
+            for process in self.processes.values():
+                process.kill(signal.SIGTERM)  # the worker and its agent (which stops its base on SIGTERM)
 
 
 def _prepare(runs: list[Run], out: Path) -> dict[str, tuple[WorldFacts, Path, Path]]:
@@ -258,16 +363,13 @@ def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Worker
     spec = WorkerSpec(asdict(run), str(world.path), str(picture), prior, settings.budget_s, str(run_dir))
     (run_dir / "spec.json").write_text(json.dumps(asdict(spec), indent=2))
     started = time.monotonic()
-    rc = workers.run([sys.executable, "-m", "offboard.experiment", str(run_dir / "spec.json")],
-                     run_dir / "worker.log", settings.run_timeout_s)
+    answer = workers.run(run_dir / "spec.json", settings.run_timeout_s)
     wall = time.monotonic() - started
-    if rc is None or workers.stopping:
+    if answer is None or workers.stopping:
         return None  # interrupted: not a result, redone on resume
-    if rc == 0 and (run_dir / "summary.json").is_file():
+    if answer == "ok" and (run_dir / "summary.json").is_file():
         return make_row(run, world, json.loads((run_dir / "summary.json").read_text()), wall)
-    tail = (run_dir / "worker.log").read_text().strip().splitlines()[-1:] or ["no output"]
-    reason = "timeout" if rc == -1 else f"exit {rc}: {tail[0]}"
-    return make_row(run, world, None, wall, reason)
+    return make_row(run, world, None, wall, answer)
 
 
 def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progress], None] | None = None) -> Progress:
@@ -278,7 +380,7 @@ def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progr
     todo = [r for r in runs if r.key not in done]
     progress = Progress(total=len(runs), skipped=len(runs) - len(todo))
     prepared = _prepare(todo, settings.out)
-    workers = _Workers(settings.jobs)
+    workers = _Workers(settings.jobs, settings.out / "workers")
     if on_progress:
         on_progress(progress)
     with ThreadPoolExecutor(max_workers=max(1, settings.jobs)) as pool:
@@ -297,6 +399,7 @@ def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progr
             workers.stop()
             pool.shutdown(cancel_futures=True)
             raise
+    workers.close()
     return progress
 
 
@@ -398,5 +501,7 @@ def main(args: argparse.Namespace) -> int:
     return 0 if failed == 0 else 1
 
 
-if __name__ == "__main__":  # a worker: python -m offboard.experiment SPEC.json
-    sys.exit(_worker_main(sys.argv[1:]))
+if __name__ == "__main__":  # a worker: python -m offboard.experiment --serve LOG_DIR
+    if sys.argv[1:2] != ["--serve"] or len(sys.argv) != 3:
+        sys.exit("usage: python -m offboard.experiment --serve LOG_DIR (the sweep starts its workers itself)")
+    sys.exit(_serve(Path(sys.argv[2])))
