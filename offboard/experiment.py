@@ -473,7 +473,7 @@ def _interrupt(signum: int, frame: object) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    failed = 0
+    failed, sweep_figures = 0, None
     if not args.report_only:
         try:
             runs = build_runs(grid_from_args(args))
@@ -490,13 +490,13 @@ def main(args: argparse.Namespace) -> int:
             sys.stderr.write("\ninterrupted: run the same command again to resume\n")
             return 130
         sys.stderr.write("\n")
-        failed = progress.failed
-        log.info("%d runs done, %d failed, %d already done, in %.0f s", progress.done, failed, progress.skipped,
-                 time.monotonic() - started)
+        failed, wall_s = progress.failed, time.monotonic() - started
+        log.info("%d runs done, %d failed, %d already done, in %.0f s", progress.done, failed, progress.skipped, wall_s)
+        sweep_figures = (progress.done + progress.failed, wall_s, args.jobs)
     if not (args.out / "results.csv").is_file():
         log.error("no results in %s: nothing to report", args.out)
         return 2
-    for path in write_report(args.out / "results.csv", args.out):
+    for path in write_report(args.out / "results.csv", args.out, sweep_figures):
         log.info("wrote %s", path)
     return 0 if failed == 0 else 1
 

@@ -293,19 +293,23 @@ def _errors_md(rows: list[dict]) -> list[str]:
     return lines + [f"- {n} × `{message}`" for message, n in sorted(errors.items(), key=lambda e: -e[1])] + [""]
 
 
-def _wall_md(rows: list[dict]) -> list[str]:
+def _wall_md(rows: list[dict], sweep: tuple[int, float, int] | None = None) -> list[str]:
     walls = [r["run_wall_s"] for r in rows if r["run_wall_s"] is not None]
     if not walls:
         return []
+    ran = [] if sweep is None else [f"The sweep that wrote this report ran {sweep[0]} runs in **{sweep[1] / 60:.1f} min** "
+                                    f"of wall time with {sweep[2]} jobs.", ""]
     methods = dict.fromkeys(r["method"] for r in rows)
     by_method = {m: _mean([r["run_wall_s"] for r in rows if r["method"] == m]) for m in methods}
-    return ["## Wall time", "", f"{len(walls)} runs took {sum(walls) / 60:.1f} min of worker wall time in all "
+    return ["## Wall time", "", *ran, f"{len(walls)} runs took {sum(walls) / 60:.1f} min of worker wall time in all "
             f"(mean {statistics.fmean(walls):.0f} s, median {statistics.median(walls):.0f} s, max {max(walls):.0f} s "
-            "per run, including the agent's start-up); with N jobs the sweep's wall time is about this sum / N. "
+            "per run; a worker's first run includes its agent's start-up); with N jobs the sweep's wall time is about "
+            "this sum / N. "
             "Mean per run: " + ", ".join(f"{m} {_fmt(w, 0)} s" for m, w in by_method.items()) + ".", ""]
 
 
-def render(rows: list[dict]) -> str:
+def render(rows: list[dict], sweep: tuple[int, float, int] | None = None) -> str:
+    """The report; ``sweep``: (runs, wall seconds, jobs) of the sweep that just ran, if one did."""
     ours = syt_tables(rows)
     syt = [r for r in rows if r["method"] == "syt"]
     rate = sum(r["success"] for r in syt) / len(syt) if syt else None
@@ -327,7 +331,7 @@ def render(rows: list[dict]) -> str:
     for i, v in enumerate(conclusions(ours), 1):
         verdict = {True: "**agrees**", False: "**does not agree**", None: "**cannot tell** (a cell has no success)"}
         lines.append(f"{i}. {v.claim} — {verdict[v.agrees]}: {v.evidence}.")
-    lines += [""] + _wall_md(rows) + ["## Plots", ""] + [f"![{p}]({p})" for p in PLOTS] + [""]
+    lines += [""] + _wall_md(rows, sweep) + ["## Plots", ""] + [f"![{p}]({p})" for p in PLOTS] + [""]
     return "\n".join(lines)
 
 
@@ -396,10 +400,10 @@ def write_plots(rows: list[dict], out: Path) -> list[Path]:
     return paths + [out / "success.png"]
 
 
-def write_report(results: Path, out: Path) -> list[Path]:
+def write_report(results: Path, out: Path, sweep: tuple[int, float, int] | None = None) -> list[Path]:
     """report.md and the plots beside it; returns what was written."""
     rows = load_results(results)
     out.mkdir(parents=True, exist_ok=True)
     report = out / "report.md"
-    report.write_text(render(rows))
+    report.write_text(render(rows, sweep))
     return [report, *write_plots(rows, out)]

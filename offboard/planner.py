@@ -116,7 +116,10 @@ class SearchPlanner:
         elif here_covering >= self.config.move_threshold and here_detection.max() >= self.config.min_detection_prob:
             decision = self._look_here(values, look_t, here_covering)
         else:
-            decision = self._move(values, far_t, path_lengths_m, here_covering, pose)
+            why = (f"covering probability here {here_covering:.3f} < Θ_move {self.config.move_threshold:g}"
+                   if here_covering < self.config.move_threshold else
+                   f"no look left here finds it with probability ≥ {self.config.min_detection_prob:g}")
+            decision = self._move(values, far_t, path_lengths_m, here_covering, pose, why)
         if elapsed_s + decision.time_s > self.config.budget_s:
             return Decision("stop", f"the next action ({decision.time_s:.1f} s) would exceed the budget "
                                     f"K = {self.config.budget_s:g} s", status="budget",
@@ -178,7 +181,7 @@ class SearchPlanner:
                         values=values)
 
     def _move(self, values: ActionValues, far_t: np.ndarray, path_lengths_m: np.ndarray, covering: float,
-              pose: Pose2D) -> Decision:
+              pose: Pose2D, why: str) -> Decision:
         """Eq. 10-12: the next position, preferring those whose covering probability is at least
         Θ_move (the robot would leave any other at once); its first look is its best by eq. 3."""
         dist = np.asarray(path_lengths_m, float)
@@ -198,8 +201,7 @@ class SearchPlanner:
         first = values.detection_prob[j] / far_t[j]
         s = int(np.argmax(first))
         equation = {2: "eq. 10", 3: "eq. 11", 4: "eq. 12"}[self.config.cost_function]
-        return Decision("move", f"covering probability here {covering:.3f} < Θ_move {self.config.move_threshold:g}; "
-                                f"{equation} picks ({self.positions[j][0]:g}, {self.positions[j][1]:g})",
+        return Decision("move", f"{why}; {equation} picks ({self.positions[j][0]:g}, {self.positions[j][1]:g})",
                         self.settings.azimuth_rad[s], self.settings.tilt_rad[s], tuple(self.positions[j]),
                         float(values.detection_prob[j, s]), float(score[j]), float(far_t[j, s]),
                         covering_here=covering, values=values, setting=s)
