@@ -34,7 +34,7 @@ TARGET_XY = (0.6, 5.5)  # on a stand by the west wall, its picture facing +x (in
 
 @dataclass(frozen=True)
 class CalibrationGrid:
-    distance_edges_m: tuple[float, ...] = tuple(np.round(np.arange(0.25, 5.01, 0.25), 3))
+    distance_edges_m: tuple[float, ...] = tuple(np.round(np.arange(0.25, 6.01, 0.25), 3))
     off_axis_edges_deg: tuple[float, ...] = (0.0, 7.0, 14.0, 21.0, 28.0, 35.0)
     facing_edges_deg: tuple[float, ...] = tuple(float(v) for v in range(0, 91, 10))
     samples: int = 1  # views per cell (each with the opposite sign of the angles from the last)
@@ -127,11 +127,26 @@ def calibrate(robot: RobotClient, detector: Detector, grid: CalibrationGrid, fac
 
 
 def to_table(name: str, grid: CalibrationGrid, tally: Tally) -> DetectabilityTable:
-    rate = np.divide(tally.hits, tally.views, out=np.zeros(tally.hits.shape), where=tally.views > 0)
+    rate = pooled_rate(tally.hits, tally.views)
     views = tally.negative_views + int(tally.views.sum())
     return DetectabilityTable(name, np.array(grid.distance_edges_m), np.array(grid.off_axis_edges_deg),
                               np.array(grid.facing_edges_deg), rate, tally.views,
                               tally.false_positives / max(views, 1), float(np.median(tally.detect_ms or [0.0])))
+
+
+def pooled_rate(hits: np.ndarray, views: np.ndarray) -> np.ndarray:
+    """Detection rate per cell from its views and its neighbours' (the 3 × 3 × 3 cells around it:
+    detection varies smoothly, and one view a cell says little), counting one miss more than seen:
+    hits / (views + 1). So no cell claims certainty (which would let one look rule a place out for
+    good) and thinly measured cells lean towards "not detected" (the planner then looks again
+    rather than trusting a look that may not work). Cells with no view around them get 0."""
+    return _box_sum(hits.astype(float)) / (_box_sum(views.astype(float)) + 1.0)
+
+
+def _box_sum(values: np.ndarray) -> np.ndarray:
+    padded = np.pad(values, 1)
+    n0, n1, n2 = values.shape
+    return sum(padded[i:i + n0, j:j + n1, k:k + n2] for i in range(3) for j in range(3) for k in range(3))
 
 
 def _cells(grid: CalibrationGrid) -> list[tuple[tuple[int, int, int], tuple[float, float, float]]]:

@@ -18,17 +18,10 @@ import sys
 import time
 from pathlib import Path
 
-from shared.arguments import floats
+from shared.arguments import floats, probability
 from shared.transport import TransportConfig, add_transport_args, transport_from_args
 
 log = logging.getLogger("syt.offboard")
-
-
-def _probability(text: str) -> float:
-    value = float(text)
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"--move-threshold must lie in [0, 1], got {text}")
-    return value
 
 
 # --- search ----------------------------------------------------------------------------------------
@@ -46,7 +39,7 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--prior", action="append", default=[], metavar="KIND",
                         help="uniform | hints:FILE | surfaces | saliency | last-seen:X,Y,Z[,S] (repeatable)")
     parser.add_argument("--budget-s", type=float, default=1800.0, metavar="SECONDS", help="robot-time budget K")
-    parser.add_argument("--move-threshold", type=_probability, default=None, metavar="P", help="Θ_move")
+    parser.add_argument("--move-threshold", type=probability("--move-threshold"), default=None, metavar="P", help="Θ_move")
     parser.add_argument("--detector", choices=("sift", "ncc", "auto"), default="sift")
     parser.add_argument("--detectability", action="append", default=[], metavar="NAME=FILE",
                         help="a detector's measured detectability table (from calibrate-detector)")

@@ -48,7 +48,7 @@ from offboard.baselines import BASELINES, BaselineContext
 from offboard.experiment_report import append_row, finished_keys, write_report
 from offboard.experiment_world import (Placement, Start, WorldFacts, load_facts, robot_starts, tables_hints,
                                        target_placements, viewpoint)
-from shared.arguments import floats
+from shared.arguments import floats, probability
 
 log = logging.getLogger(__name__)
 
@@ -146,6 +146,7 @@ class WorkerSpec:
     prior_spec: str
     budget_s: float
     out_dir: str
+    move_threshold: float | None = None  # Θ_move; None: the planner's default
 
 
 class _RunWorker:
@@ -177,6 +178,7 @@ class _RunWorker:
         request = SearchRequest(pictures=(Path(spec.picture),), target_size_m=world.target_size_m,
                                 target_sides=world.target_sides, room_m=world.room_m,
                                 cost=run.cost or 3, priors=(spec.prior_spec,), budget_s=spec.budget_s,
+                                move_threshold=spec.move_threshold,
                                 out_dir=Path(spec.out_dir), record=False)
         return run_search(transport, request, policy, self._detectors)
 
@@ -230,6 +232,7 @@ class SweepSettings:
     jobs: int = field(default_factory=lambda: os.cpu_count() or 1)
     budget_s: float = 1800.0
     run_timeout_s: float = 3600.0  # wall clock, per run
+    move_threshold: float | None = None  # Θ_move for every SYT run (a sweep of its own: use its own --out)
 
 
 @dataclass
@@ -360,7 +363,8 @@ def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Worker
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "summary.json").unlink(missing_ok=True)  # a leftover of an interrupted attempt
     prior = "uniform" if run.prior == "uniform" else f"hints:{hint_file}"
-    spec = WorkerSpec(asdict(run), str(world.path), str(picture), prior, settings.budget_s, str(run_dir))
+    spec = WorkerSpec(asdict(run), str(world.path), str(picture), prior, settings.budget_s, str(run_dir),
+                      settings.move_threshold)
     (run_dir / "spec.json").write_text(json.dumps(asdict(spec), indent=2))
     started = time.monotonic()
     answer = workers.run(run_dir / "spec.json", settings.run_timeout_s)
@@ -442,6 +446,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="use these target placements instead (repeatable)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N", help="runs at once")
     parser.add_argument("--budget-s", type=float, default=1800.0, metavar="SECONDS", help="robot-time budget K")
+    parser.add_argument("--move-threshold", type=probability("--move-threshold"), metavar="P",
+                        help="Θ_move for the SYT runs (default: the planner's); give each value its own --out")
     parser.add_argument("--limit", type=int, metavar="N", help="only the first N runs of the grid")
     parser.add_argument("--run-timeout-s", type=float, default=3600.0, metavar="SECONDS", help="wall clock per run")
     parser.add_argument("--report-only", action="store_true", help="rewrite report.md and the plots from results.csv")
@@ -485,7 +491,8 @@ def main(args: argparse.Namespace) -> int:
         started = time.monotonic()
         signal.signal(signal.SIGTERM, _interrupt)  # stop the workers and their agents, as on Ctrl-C
         try:
-            progress = sweep(runs, SweepSettings(args.out, args.jobs, args.budget_s, args.run_timeout_s), _show)
+            settings = SweepSettings(args.out, args.jobs, args.budget_s, args.run_timeout_s, args.move_threshold)
+            progress = sweep(runs, settings, _show)
         except KeyboardInterrupt:
             sys.stderr.write("\ninterrupted: run the same command again to resume\n")
             return 130

@@ -20,3 +20,17 @@ def floats(count: int, flag: str, positive: bool = False) -> Callable[[str], tup
             raise argparse.ArgumentTypeError(f"{flag}: expected {count} {kind} comma-separated numbers, got {text!r}")
         return values
     return parse
+
+
+def probability(flag: str) -> Callable[[str], float]:
+    """An argparse type for a probability in [0, 1], e.g. ``--move-threshold 0.05``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag}: expected a number in [0, 1], got {text!r}") from None
+        if not 0.0 <= value <= 1.0:
+            raise argparse.ArgumentTypeError(f"{flag} must lie in [0, 1], got {text}")
+        return value
+    return parse
