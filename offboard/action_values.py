@@ -9,9 +9,12 @@ all 544 actions of the report's room in a few milliseconds the belief is read at
 resolution (blocks of cubes, :meth:`TargetBelief.coarse_mass`); the update after a real look is
 exact per cube (:mod:`offboard.detection_function`).
 
-The covering probability ``Prob_Ψj`` of a position counts the mass inside its sensed sphere that a
-look from there could detect at all: inside the view of one of the settings, with a facing turned
-towards the position. A position does not look promising for what it can never see.
+The covering probability ``Prob_Ψj`` of a position is the report's mass inside its sensed sphere,
+each block weighted by the best detectability any setting from there has on it: the probability
+that looking around from there would find the target. Unweighted, the sphere's far shell (where
+the detector only sometimes succeeds: SIFT at 4-6 m) makes a distant position look as good as a
+near one, and eq. 11 then shuttles between cheap positions whose looks each find little; mass the
+position can never see (outside every view, facing away) counts for nothing either way.
 """
 
 from __future__ import annotations
@@ -61,7 +64,7 @@ class CameraSettings:
 @dataclass(frozen=True)
 class ActionValues:
     detection_prob: np.ndarray  # (P, S): expected P_Ψ(f), eq. 1
-    covering_prob: np.ndarray  # (P,): Prob_Ψj, detectable mass inside the sensed sphere
+    covering_prob: np.ndarray  # (P,): Prob_Ψj, mass inside the sensed sphere weighted by its best detectability
 
 
 def block_centers(belief: TargetBelief) -> np.ndarray:
@@ -94,7 +97,6 @@ class ActionGeometry:
             block_centers(belief), self.centers_m, geometry, bins.el_count, bins.az_count,
             np.ascontiguousarray(settings.rotations(mount)), table.distance_edges_m, table.off_axis_edges_deg,
             table.facing_edges_deg, belief.facing_azimuths_rad)
-        self.facing_visible = table.max_facing_deg
         self.block_margin_m = 0.5 * belief.coarse_factor * belief.grid.resolution_m
         self.table = table
 
@@ -105,10 +107,9 @@ def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSphe
     mass = np.ascontiguousarray(belief.coarse_mass().reshape(-1, belief.facing_sectors))
     radius = spheres.radius_m.reshape(len(geometry.positions_m), -1)
     rate = np.ascontiguousarray(geometry.table.rate)
-    facing_ok = geometry.table.facing_edges_deg[1:] <= geometry.facing_visible + 1e-9
     detection, covering = _score(mass, geometry.distance_m, geometry.sphere_bin, geometry.distance_bin,
                                  geometry.facing_bin, geometry.off_axis_bin, np.ascontiguousarray(radius),
-                                 geometry.block_margin_m, rate, facing_ok)
+                                 geometry.block_margin_m, rate)
     return ActionValues(detection, covering)
 
 
@@ -154,35 +155,30 @@ def _geometry(centers, positions, geometry, n_el, n_az, rotations, d_edges, o_ed
 
 
 @numba.njit(cache=True, parallel=True)
-def _score(mass, distance, sphere_bin, distance_bin, facing_bin, off_axis_bin, radius, margin, rate, facing_ok):
+def _score(mass, distance, sphere_bin, distance_bin, facing_bin, off_axis_bin, radius, margin, rate):
     n_pos, n_blk = distance.shape
     n_set, n_fac = off_axis_bin.shape[2], mass.shape[1]
     detection = np.zeros((n_pos, n_set))
     covering = np.zeros(n_pos)
+    best = np.zeros((n_pos, n_fac))  # per position: best detectability of the block at hand, per facing
     for p in numba.prange(n_pos):
         for c in range(n_blk):
-            sb = sphere_bin[p, c]
-            if sb < 0 or distance[p, c] > radius[p, sb] + margin:
+            sb, db = sphere_bin[p, c], distance_bin[p, c]
+            if sb < 0 or db < 0 or distance[p, c] > radius[p, sb] + margin:
                 continue  # out of reach, or behind the first obstacle in that direction
-            db = distance_bin[p, c]
-            in_a_view = False
+            best[p, :] = 0.0
             for a in range(n_set):
                 ob = off_axis_bin[p, c, a]
                 if ob < 0:
-                    continue
-                in_a_view = True
-                if db < 0:
                     continue
                 value = 0.0
                 for s in range(n_fac):
                     fb = facing_bin[p, c, s]
                     if fb >= 0:
-                        value += mass[c, s] * rate[db, ob, fb]
+                        b = rate[db, ob, fb]
+                        value += mass[c, s] * b
+                        best[p, s] = max(best[p, s], b)
                 detection[p, a] += value
-            if not in_a_view:
-                continue  # no setting looks there: it is not part of what this position covers
             for s in range(n_fac):
-                fb = facing_bin[p, c, s]
-                if fb >= 0 and facing_ok[fb]:
-                    covering[p] += mass[c, s]
+                covering[p] += mass[c, s] * best[p, s]
     return detection, covering

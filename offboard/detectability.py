@@ -49,11 +49,6 @@ class DetectabilityTable:
             return (0.0, 0.0)
         return float(self.distance_edges_m[useful[0]]), float(self.distance_edges_m[useful[-1] + 1])
 
-    @property
-    def max_facing_deg(self) -> float:
-        useful = np.nonzero(self.rate.max(axis=(0, 1)) > 0.05)[0]
-        return float(self.facing_edges_deg[useful[-1] + 1]) if useful.size else 0.0
-
     def lookup(self, distance_m: np.ndarray, off_axis_deg: np.ndarray, facing_deg: np.ndarray) -> np.ndarray:
         """Detection probability per query (nearest cell; zero outside the measured ranges)."""
         idx = [np.searchsorted(edges, np.asarray(x), side="right") - 1 for edges, x in
