@@ -275,6 +275,17 @@ def test_a_tiny_sweep_end_to_end_and_a_redone_run_gives_the_same_numbers(tmp_pat
         assert redone[column] == before[column], column
 
 
+@pytest.mark.integration
+def test_a_failed_run_is_a_row_naming_why_and_the_worker_goes_on(tmp_path):
+    impossible = "4.5,2.5,0.3,-90"  # inside the centre table: the simulator refuses the placement
+    argv = ("--out", str(tmp_path), "--start", "1.7,3.3,90", "--target", impossible, "--target", "1.7,4.65,0.75,-90",
+            "--costs", "3", "--priors", "uniform", "--jobs", "1")
+    assert experiment.main(_args(*argv)) == 1  # a run failed
+    rows = {r["target"]: r for r in csv.DictReader((tmp_path / "results.csv").open())}
+    assert "overlaps obstacle" in rows[impossible]["status"] and rows[impossible]["success"] == "False"
+    assert rows["1.7,4.65,0.75,-90"]["success"] == "True"
+
+
 def test_tours_let_syt_confirm_a_weak_detection():
     planner = _planner()
     planner.belief.concentrate(np.array([3.0, 2.4, 0.9]), 0.1)  # what a weak detection does

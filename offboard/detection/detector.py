@@ -139,6 +139,37 @@ def operating_range(model: TargetModel, intrinsics: Intrinsics, *, min_face_px: 
     return (near, far)
 
 
+class MeasuredDetector:
+    """What every detector shares: its operating range, and its cost per image measured as it runs
+    (seeded by timing it on :func:`timing_image` without the target: most images of a search do not
+    hold it). Subclasses set ``name`` and implement ``_detect``."""
+
+    name = ""
+
+    def __init__(self, range_m: tuple[float, float]) -> None:
+        self._range = range_m
+        self._meter = CostMeter()
+
+    def _measure_cost(self, model: TargetModel, intrinsics: Intrinsics, repeats: int) -> None:
+        image = timing_image(model, intrinsics, with_target=False)
+        for _ in range(repeats):
+            self.detect(image)
+
+    @property
+    def cost_ms(self) -> float:
+        return self._meter.median_ms
+
+    @property
+    def range_m(self) -> tuple[float, float]:
+        return self._range
+
+    def detect(self, left_rgb: np.ndarray) -> Detection | None:
+        return self._meter.timed(self._detect, left_rgb)
+
+    def _detect(self, left_rgb: np.ndarray) -> Detection | None:
+        raise NotImplementedError
+
+
 class CostMeter:
     """Running median of the last ``window`` detection times, seeded at construction by timing the
     detector on a synthetic image of the camera's size (see :func:`timing_image`)."""

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from offboard.detection.detector import CostMeter, Detection, operating_range, timing_image, to_grey
+from offboard.detection.detector import Detection, MeasuredDetector, operating_range, to_grey
 from offboard.detection.target_model import TargetModel
 from shared.geometry import Intrinsics
 
@@ -45,7 +45,7 @@ class _Peak:
         return self.x + self.width_px / 2, self.y + self.width_px * aspect / 2
 
 
-class NccDetector:
+class NccDetector(MeasuredDetector):
     """Multi-scale normalised correlation, coarse to fine. See the module docstring."""
 
     name = "ncc"
@@ -58,30 +58,16 @@ class NccDetector:
         self.threshold, self.confident_threshold = threshold, max(confident_threshold, threshold)
         self.scale_step, self.coarse_px, self.refine_px = scale_step, coarse_px, refine_px
         self.min_level, self.max_level, self.candidates = min_level, max(max_level, min_level), candidates
-        self._range = operating_range(model, intrinsics, min_face_px=min_face_px)
+        super().__init__(operating_range(model, intrinsics, min_face_px=min_face_px))
         self._aspect = model.face_height_m / model.face_width_m  # template height per width
         near_px = intrinsics.fx_px * model.face_width_m / self._range[0]
         count = int(math.log(near_px / min_face_px) / math.log(scale_step)) + 1
         self._widths = min_face_px * scale_step ** np.arange(count)
         self._greys = tuple(to_grey(p) for p in model.pictures)
         self._coarse = tuple(tuple(self._coarse_template(grey, w) for w in self._widths) for grey in self._greys)
-        self._meter = CostMeter()
-        image = timing_image(model, intrinsics, with_target=False)
-        for _ in range(cost_repeats):
-            self.detect(image)
+        self._measure_cost(model, intrinsics, cost_repeats)
         log.info("ncc: %d sizes %.0f-%.0f px, %.1f ms per image, range %.2f-%.2f m",
                  len(self._widths), self._widths[0], self._widths[-1], self.cost_ms, *self._range)
-
-    @property
-    def cost_ms(self) -> float:
-        return self._meter.median_ms
-
-    @property
-    def range_m(self) -> tuple[float, float]:
-        return self._range
-
-    def detect(self, left_rgb: np.ndarray) -> Detection | None:
-        return self._meter.timed(self._detect, left_rgb)
 
     def _detect(self, left_rgb: np.ndarray) -> Detection | None:
         pyramid = [to_grey(left_rgb)]

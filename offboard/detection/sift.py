@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from offboard.detection.detector import CostMeter, Detection, operating_range, timing_image, to_grey
+from offboard.detection.detector import Detection, MeasuredDetector, operating_range, to_grey
 from offboard.detection.target_model import TargetModel, TargetModelError
 from shared.geometry import Intrinsics
 
@@ -73,7 +73,7 @@ class _Matches:
     face_px: np.ndarray  # (k,) face width in the image that each match's scale predicts
 
 
-class SiftDetector:
+class SiftDetector(MeasuredDetector):
     """SIFT, ratio test, RANSAC homography, with a focused second look. See the module docstring."""
 
     name = "sift"
@@ -95,29 +95,15 @@ class SiftDetector:
             raise ValueError(f"global_shrink must be at least 1, got {global_shrink}")
         self.global_zoom = 1.0 / global_shrink
         # A face magnified far beyond the picture's own pixels has no features as fine as the model's.
-        self._range = operating_range(model, intrinsics, min_face_px=min_face_px, max_magnification=max_magnification)
+        super().__init__(operating_range(model, intrinsics, min_face_px=min_face_px, max_magnification=max_magnification))
         self._global = cv2.SIFT_create(nfeatures=max_features, contrastThreshold=contrast_threshold)
         self._focus = cv2.SIFT_create(contrastThreshold=focus_contrast_threshold)
         model_sift = cv2.SIFT_create(nfeatures=features_per_view, contrastThreshold=contrast_threshold)
         self._models = tuple(_model_features(to_grey(p), model_sift, min_face_px, scale_step, tilt)
                              for p in model.pictures)
-        self._meter = CostMeter()
-        image = timing_image(model, intrinsics, with_target=False)
-        for _ in range(cost_repeats):
-            self.detect(image)
+        self._measure_cost(model, intrinsics, cost_repeats)
         log.info("sift: %s model keypoints, %.1f ms per image, range %.2f-%.2f m",
                  [len(m.points) for m in self._models], self.cost_ms, *self._range)
-
-    @property
-    def cost_ms(self) -> float:
-        return self._meter.median_ms
-
-    @property
-    def range_m(self) -> tuple[float, float]:
-        return self._range
-
-    def detect(self, left_rgb: np.ndarray) -> Detection | None:
-        return self._meter.timed(self._detect, left_rgb)
 
     def _detect(self, left_rgb: np.ndarray) -> Detection | None:
         grey = to_grey(left_rgb)
