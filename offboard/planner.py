@@ -40,7 +40,7 @@ from shared.strict import bounds
 @dataclass(frozen=True)
 class PlannerConfig:
     cost_function: Literal[1, 2, 3, 4] = 3  # the report's best (Tables 2 and 3)
-    move_threshold: float = field(default=0.1, metadata=bounds(0.0, 1.0))  # Θ_move (paper sweep: 0.02, 0.1, 0.25 tried; 0.1 fastest)
+    move_threshold: float = field(default=0.1, metadata=bounds(0.0, 1.0))  # Θ_move (paper, cost 3: 0.05-0.1 fastest)
     distance_weight: float = field(default=1.0, metadata=bounds(0.0, 1e3))  # A of eq. 12 (report: 1)
     budget_s: float = field(default=1800.0, metadata=bounds(1.0, 1e6))  # K, robot time
     min_detection_prob: float = field(default=2e-3, metadata=bounds(0.0, 1.0))  # below: not worth a look
@@ -102,7 +102,11 @@ class SearchPlanner:
         values = self._values(pose, occupancy)
         if taken:
             values.detection_prob[-1, sorted(taken)] = 0.0
-        here_detection, here_covering = values.detection_prob[-1], float(values.covering_prob[-1])
+        here_detection = values.detection_prob[-1]
+        # What looking on here can still find: no more than the looks not yet taken here would (the
+        # covering also counts what the taken views left behind, which no look here will see again).
+        here_covering = min(float(values.covering_prob[-1]), float(here_detection.sum()))
+        values.covering_prob[-1] = here_covering
         look_t = self.time_model.look_times_s(pose.heading_rad, pan_rad, tilt_rad, self.settings.azimuth_rad,
                                               self.settings.tilt_rad)
         far_t = self._candidate_times(pose, path_lengths_m)
