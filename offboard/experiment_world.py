@@ -245,9 +245,11 @@ def target_placements(world: WorldFacts, count: int = 4) -> list[Placement]:
 def robot_starts(world: WorldFacts, count: int = 5, margin_m: float = 0.45) -> list[Start]:
     """The world's own start, then the free spots farthest from those already chosen (corners and
     edges first, as in the report's Fig. 5a), each heading for the room's centre."""
-    criteria = SeeingCriteria(robot_radius_m=margin_m, resolution_m=0.25)
-    floor = true_floor_map(world.truth((0.0, 0.0, 0.0, 0.0)), criteria)  # the target plays no part
-    free = (np.argwhere(~floor.blocked) + 0.5) * criteria.resolution_m
+    # candidate spots every 0.25 m, judged on the fine map (a thin partition slips between coarse cells)
+    floor = true_floor_map(world.truth((0.0, 0.0, 0.0, 0.0)), SeeingCriteria(robot_radius_m=margin_m))
+    step = round(0.25 / floor.resolution_m)
+    spots = np.argwhere(np.ones(np.array(floor.blocked.shape) // step, bool)) * step + step // 2
+    free = (spots[~floor.blocked[spots[:, 0], spots[:, 1]]] + 0.5) * floor.resolution_m
     chosen = [np.array(world.start[:2])]
     while len(chosen) < count and len(free):
         gaps = np.min([np.hypot(*(free - c).T) for c in chosen], axis=0)
