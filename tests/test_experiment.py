@@ -17,7 +17,7 @@ from offboard.belief import TargetBelief
 from offboard.detectability import DetectabilityTable
 from offboard.experiment import PAPER, Run, build_runs, make_row
 from offboard.experiment_report import COLUMNS, REPORT, append_row, conclusions, load_results, render, write_report
-from offboard.experiment_world import (Obstacle, Truth, load_facts, robot_starts, seeing_cells, tables_hints,
+from offboard.experiment_world import (Obstacle, SeeingCriteria, Truth, load_facts, robot_starts, seeing_cells, tables_hints,
                                        target_placements, true_floor_map, viewpoint)
 from offboard.occupancy import OccupancyGrid
 from offboard.planner import PlannerConfig, SearchPlanner
@@ -63,6 +63,16 @@ def test_paper_lab_targets_sit_on_table_tops_facing_open_floor_and_starts_are_fr
     floor = true_floor_map(world.truth(world.target))
     for x, y, _ in robot_starts(world, 5):
         assert not floor.blocked[int(x / floor.resolution_m), int(y / floor.resolution_m)]
+
+
+@pytest.mark.parametrize("name", ["paper-lab", "office", "high-shelf"])
+def test_derived_starts_keep_their_margin_from_every_obstacle_however_thin(name):
+    world = load_facts(name)
+    for x, y, _ in robot_starts(world, 5)[1:]:  # the first is the world's own
+        for box in world.obstacles:
+            if box.min_m[2] < SeeingCriteria().robot_height_m:
+                gap = np.hypot(max(box.min_m[0] - x, 0.0, x - box.max_m[0]), max(box.min_m[1] - y, 0.0, y - box.max_m[1]))
+                assert gap >= 0.45 - 0.05, (name, (x, y), box.name, gap)  # margin, less a fine cell
 
 
 def test_rows_have_every_column_and_measure_the_estimate_and_spl():
