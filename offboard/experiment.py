@@ -48,7 +48,9 @@ from offboard.baselines import BASELINES, BaselineContext
 from offboard.experiment_report import append_row, finished_keys, write_report
 from offboard.experiment_world import (Placement, Start, WorldFacts, load_facts, robot_starts, tables_hints,
                                        target_placements, viewpoint)
+from offboard.search import SearchConfig
 from shared.arguments import floats, probability
+from shared.config import load_config
 
 log = logging.getLogger(__name__)
 
@@ -147,6 +149,7 @@ class WorkerSpec:
     budget_s: float
     out_dir: str
     move_threshold: float | None = None  # Θ_move; None: the planner's default
+    config_path: str | None = None  # SearchConfig TOML for every run; None: the defaults
 
 
 class _RunWorker:
@@ -179,6 +182,7 @@ class _RunWorker:
                                 target_sides=world.target_sides, room_m=world.room_m,
                                 cost=run.cost or 3, priors=(spec.prior_spec,), budget_s=spec.budget_s,
                                 move_threshold=spec.move_threshold,
+                                config_path=None if spec.config_path is None else Path(spec.config_path),
                                 out_dir=Path(spec.out_dir), record=False)
         return run_search(transport, request, policy, self._detectors)
 
@@ -233,6 +237,7 @@ class SweepSettings:
     budget_s: float = 1800.0
     run_timeout_s: float = 3600.0  # wall clock, per run
     move_threshold: float | None = None  # Θ_move for every SYT run (a sweep of its own: use its own --out)
+    config_path: Path | None = None  # SearchConfig TOML for every run (likewise)
 
 
 @dataclass
@@ -364,7 +369,7 @@ def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Worker
     (run_dir / "summary.json").unlink(missing_ok=True)  # a leftover of an interrupted attempt
     prior = "uniform" if run.prior == "uniform" else f"hints:{hint_file}"
     spec = WorkerSpec(asdict(run), str(world.path), str(picture), prior, settings.budget_s, str(run_dir),
-                      settings.move_threshold)
+                      settings.move_threshold, None if settings.config_path is None else str(settings.config_path))
     (run_dir / "spec.json").write_text(json.dumps(asdict(spec), indent=2))
     started = time.monotonic()
     answer = workers.run(run_dir / "spec.json", settings.run_timeout_s)
@@ -448,6 +453,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--budget-s", type=float, default=1800.0, metavar="SECONDS", help="robot-time budget K")
     parser.add_argument("--move-threshold", type=probability("--move-threshold"), metavar="P",
                         help="Θ_move for the SYT runs (default: the planner's); give each value its own --out")
+    parser.add_argument("--config", type=Path, metavar="FILE.toml",
+                        help="search configuration (SearchConfig) for every run; give it its own --out")
     parser.add_argument("--limit", type=int, metavar="N", help="only the first N runs of the grid")
     parser.add_argument("--run-timeout-s", type=float, default=3600.0, metavar="SECONDS", help="wall clock per run")
     parser.add_argument("--report-only", action="store_true", help="rewrite report.md and the plots from results.csv")
@@ -483,15 +490,18 @@ def main(args: argparse.Namespace) -> int:
     if not args.report_only:
         try:
             runs = build_runs(grid_from_args(args))
+            if args.config:
+                load_config(SearchConfig, args.config)  # refuse a broken file before any run starts
         except (ValueError, OSError, KeyError, tomllib.TOMLDecodeError) as exc:
-            log.error("cannot build the grid: %s", exc)
+            log.error("cannot start the sweep: %s", exc)
             return 2
         runs = runs[:args.limit] if args.limit else runs
         log.info("%d runs into %s, %d at a time", len(runs), args.out, args.jobs)
         started = time.monotonic()
         signal.signal(signal.SIGTERM, _interrupt)  # stop the workers and their agents, as on Ctrl-C
         try:
-            settings = SweepSettings(args.out, args.jobs, args.budget_s, args.run_timeout_s, args.move_threshold)
+            settings = SweepSettings(args.out, args.jobs, args.budget_s, args.run_timeout_s, args.move_threshold,
+                                     args.config)
             progress = sweep(runs, settings, _show)
         except KeyboardInterrupt:
             sys.stderr.write("\ninterrupted: run the same command again to resume\n")

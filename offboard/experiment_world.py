@@ -242,14 +242,21 @@ def target_placements(world: WorldFacts, count: int = 4) -> list[Placement]:
     return chosen[:count]
 
 
-def robot_starts(world: WorldFacts, count: int = 5, margin_m: float = 0.45) -> list[Start]:
+def robot_starts(world: WorldFacts, count: int = 5, margin_m: float = 0.45,
+                 drive_clearance_m: float = 0.31) -> list[Start]:
     """The world's own start, then the free spots farthest from those already chosen (corners and
-    edges first, as in the report's Fig. 5a), each heading for the room's centre."""
+    edges first, as in the report's Fig. 5a), each heading for the room's centre. A spot keeps
+    ``margin_m`` from everything and lies in the open floor the world's start lies in, as the robot
+    with its navigation clearance (``drive_clearance_m``) sees it: not in a pocket it cannot leave."""
+    truth = world.truth((0.0, 0.0, 0.0, 0.0))  # the target plays no part
     # candidate spots every 0.25 m, judged on the fine map (a thin partition slips between coarse cells)
-    floor = true_floor_map(world.truth((0.0, 0.0, 0.0, 0.0)), SeeingCriteria(robot_radius_m=margin_m))
+    floor = true_floor_map(truth, SeeingCriteria(robot_radius_m=margin_m))
+    drivable = true_floor_map(truth, SeeingCriteria(robot_radius_m=drive_clearance_m))
+    reach = grid_planner.distance_field(drivable, world.start[:2])
     step = round(0.25 / floor.resolution_m)
     spots = np.argwhere(np.ones(np.array(floor.blocked.shape) // step, bool)) * step + step // 2
-    free = (spots[~floor.blocked[spots[:, 0], spots[:, 1]]] + 0.5) * floor.resolution_m
+    ok = ~floor.blocked[spots[:, 0], spots[:, 1]] & np.isfinite(reach[spots[:, 0], spots[:, 1]])
+    free = (spots[ok] + 0.5) * floor.resolution_m
     chosen = [np.array(world.start[:2])]
     while len(chosen) < count and len(free):
         gaps = np.min([np.hypot(*(free - c).T) for c in chosen], axis=0)

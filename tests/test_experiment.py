@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from offboard import experiment
+from offboard import experiment, grid_planner
 from offboard.baselines import BASELINES, BaselineContext
 from offboard.belief import TargetBelief
 from offboard.detectability import DetectabilityTable
@@ -68,7 +68,10 @@ def test_paper_lab_targets_sit_on_table_tops_facing_open_floor_and_starts_are_fr
 @pytest.mark.parametrize("name", ["paper-lab", "office", "high-shelf"])
 def test_derived_starts_keep_their_margin_from_every_obstacle_however_thin(name):
     world = load_facts(name)
+    drivable = true_floor_map(world.truth(world.target), SeeingCriteria(robot_radius_m=0.31))
+    reach = grid_planner.distance_field(drivable, world.start[:2])
     for x, y, _ in robot_starts(world, 5)[1:]:  # the first is the world's own
+        assert np.isfinite(reach[int(x / 0.05), int(y / 0.05)]), (name, (x, y), "a pocket the robot cannot leave")
         for box in world.obstacles:
             if box.min_m[2] < SeeingCriteria().robot_height_m:
                 gap = np.hypot(max(box.min_m[0] - x, 0.0, x - box.max_m[0]), max(box.min_m[1] - y, 0.0, y - box.max_m[1]))
