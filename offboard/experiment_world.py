@@ -122,8 +122,10 @@ def _seeing_face(truth: Truth, floor: FloorMap, criteria: SeeingCriteria, normal
     z_lo, z_hi = sorted((truth.target_center_m[2], criteria.camera_height_m))
     cells = np.stack([x[ok], y[ok]], axis=1)
     clear = np.ones(len(cells), bool)
+    centre = np.array(truth.target_center_m)
     for box in truth.obstacles:
-        if box.min_m[2] < z_hi and box.max_m[2] > z_lo:
+        under = box.max_m[2] <= centre[2] and np.all((centre[:2] >= box.min_m[:2]) & (centre[:2] <= box.max_m[:2]))
+        if box.min_m[2] < z_hi and box.max_m[2] > z_lo and not under:  # what it stands on hides nothing
             clear &= ~_segments_hit_box(face, cells, np.array(box.min_m[:2]), np.array(box.max_m[:2]))
     ok[ok] = clear
     return ok
@@ -230,10 +232,13 @@ def _table_placements(world: WorldFacts, table: Box, min_clear_m: float = 0.6) -
     return placements
 
 
-def target_placements(world: WorldFacts, count: int = 4) -> list[Placement]:
+def target_placements(world: WorldFacts, count: int = 4, drive_clearance_m: float = 0.31) -> list[Placement]:
     """Up to ``count`` placements on the world's tables, taken in turn from each table (report Fig. 5b),
-    then the world's own placement if the tables offer fewer."""
-    per_table = [_table_placements(world, t) for t in world.tables()]
+    then the world's own placement if the tables offer fewer. A table placement counts only if the
+    robot, with its navigation clearance, can drive from the world's start to where it sees it."""
+    drive = SeeingCriteria(robot_radius_m=drive_clearance_m)
+    per_table = [[p for p in _table_placements(world, t) if math.isfinite(viewpoint(world.truth(p), world.start[:2], drive)[1])]
+                 for t in world.tables()]
     chosen = []
     for rank in range(max((len(p) for p in per_table), default=0)):
         chosen += [p[rank] for p in per_table if rank < len(p)]
