@@ -158,10 +158,10 @@ class _RunWorker:
     noise seed; the planner starts afresh each run), and the detectors, built once. That saves the
     agent's and the planner's start-up, several seconds a run."""
 
-    def __init__(self, stack: contextlib.ExitStack, log_dir: Path):
-        self._stack, self._log_dir = stack, log_dir
+    def __init__(self, log_dir: Path):
+        self._log_dir = log_dir
         self._agent_world: str | None = None
-        self._agent_stack: contextlib.ExitStack | None = None
+        self._agent_stack = contextlib.ExitStack()
         self._transport = None
         self._detectors: dict = {}
 
@@ -186,25 +186,23 @@ class _RunWorker:
                                 out_dir=Path(spec.out_dir), record=False)
         return run_search(transport, request, policy, self._detectors)
 
-    def restart(self) -> None:
-        """After a failed run: a fresh agent for the next one (its state is not to be trusted)."""
-        if self._agent_stack is not None:
-            self._agent_stack.close()
-        self._agent_world = self._agent_stack = None
+    def close(self) -> None:
+        """Stop the agent; the next run (after a failed one: its state is not to be trusted) starts a fresh one."""
+        self._agent_stack.close()
+        self._agent_world = None
 
     def _agent(self, world_path: str):
         from shared.launch import onboard_agent
         from shared.transport import TransportConfig
 
         if self._agent_world != world_path:
-            self.restart()
-            stack = self._stack.enter_context(contextlib.ExitStack())
-            agent = stack.enter_context(onboard_agent(["--backend", "sim", "--world", world_path],
-                                                      self._log_dir / "onboard.log"))
+            self.close()
+            agent = self._agent_stack.enter_context(onboard_agent(["--backend", "sim", "--world", world_path],
+                                                                  self._log_dir / "onboard.log"))
             self._transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
             with self._transport.open() as session:
                 agent.wait_ready(session, "syt")
-            self._agent_world, self._agent_stack = world_path, stack
+            self._agent_world = world_path
         return self._transport
 
 
@@ -213,8 +211,7 @@ def _serve(log_dir: Path) -> int:
     ``error: ...``. Ends at end of input."""
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     logging.getLogger().handlers[0].setLevel(logging.WARNING)  # each run's search.log keeps the details
-    with contextlib.ExitStack() as stack:
-        worker = _RunWorker(stack, log_dir)
+    with contextlib.closing(_RunWorker(log_dir)) as worker:
         for line in sys.stdin:
             try:
                 worker.run(WorkerSpec(**json.loads(Path(line.strip()).read_text())))
@@ -222,7 +219,7 @@ def _serve(log_dir: Path) -> int:
             except Exception as exc:  # the run failed, not the worker: report it, start the next afresh
                 log.exception("run %s failed", line.strip())
                 answer = f"error: {type(exc).__name__}: {exc}".replace("\n", " ")
-                worker.restart()
+                worker.close()
             sys.stdout.write(answer + "\n")
             sys.stdout.flush()
     return 0
@@ -257,7 +254,7 @@ class Progress:
 class _WorkerProcess:
     """The sweep's handle on one worker process (in its own process group, with its agent)."""
 
-    def __init__(self, index: int, log_dir: Path, env: dict):
+    def __init__(self, log_dir: Path, env: dict):
         log_dir.mkdir(parents=True, exist_ok=True)
         self.log_path = log_dir / "worker.log"
         self._log = self.log_path.open("a")
@@ -326,7 +323,7 @@ class _Workers:
                     return None
                 process = self.processes.get(index)
                 if process is None or not process.alive:
-                    process = self.processes[index] = _WorkerProcess(index, self.log_dir / f"worker-{index}", self.env)
+                    process = self.processes[index] = _WorkerProcess(self.log_dir / f"worker-{index}", self.env)
             return process.run(spec_path, timeout_s)
         finally:
             self.idle.put(index)

@@ -29,6 +29,7 @@ Vec3 = tuple[float, float, float]
 Start = tuple[float, float, float]  # x, y, heading° (the agent's --start)
 Placement = tuple[float, float, float, float]  # x, y, z of the bottom centre, yaw° (the agent's --target)
 TABLE_KINDS = ("table", "desk")  # the surfaces of the "tables" prior and of the target placements
+DRIVE_CLEARANCE_M = 0.31  # what the navigator keeps from obstacles: the robot's radius 0.26 + its margin 0.05
 
 
 # --- the truth -------------------------------------------------------------------------------------
@@ -232,7 +233,8 @@ def _table_placements(world: WorldFacts, table: Box, min_clear_m: float = 0.6) -
     return placements
 
 
-def target_placements(world: WorldFacts, count: int = 4, drive_clearance_m: float = 0.31) -> list[Placement]:
+def target_placements(world: WorldFacts, count: int = 4,
+                      drive_clearance_m: float = DRIVE_CLEARANCE_M) -> list[Placement]:
     """Up to ``count`` placements on the world's tables, taken in turn from each table (report Fig. 5b),
     then the world's own placement if the tables offer fewer. A table placement counts only if the
     robot, with its navigation clearance, can drive from the world's start to where it sees it."""
@@ -248,7 +250,7 @@ def target_placements(world: WorldFacts, count: int = 4, drive_clearance_m: floa
 
 
 def robot_starts(world: WorldFacts, count: int = 5, margin_m: float = 0.45,
-                 drive_clearance_m: float = 0.31) -> list[Start]:
+                 drive_clearance_m: float = DRIVE_CLEARANCE_M) -> list[Start]:
     """The world's own start, then the free spots farthest from those already chosen (corners and
     edges first, as in the report's Fig. 5a), each heading for the room's centre. A spot keeps
     ``margin_m`` from everything and lies in the open floor the world's start lies in, as the robot

@@ -17,7 +17,7 @@ from offboard.belief import TargetBelief
 from offboard.detectability import DetectabilityTable
 from offboard.experiment import PAPER, Run, build_runs, make_row
 from offboard.experiment_report import COLUMNS, REPORT, append_row, conclusions, load_results, render, write_report
-from offboard.experiment_world import (Obstacle, SeeingCriteria, Truth, load_facts, robot_starts, seeing_cells, tables_hints,
+from offboard.experiment_world import (DRIVE_CLEARANCE_M, Obstacle, SeeingCriteria, Truth, load_facts, robot_starts, seeing_cells, tables_hints,
                                        target_placements, true_floor_map, viewpoint)
 from offboard.occupancy import OccupancyGrid
 from offboard.planner import PlannerConfig, SearchPlanner
@@ -68,7 +68,7 @@ def test_paper_lab_targets_sit_on_table_tops_facing_open_floor_and_starts_are_fr
 @pytest.mark.parametrize("name", ["paper-lab", "office", "high-shelf"])
 def test_derived_starts_keep_their_margin_from_every_obstacle_however_thin(name):
     world = load_facts(name)
-    drivable = true_floor_map(world.truth(world.target), SeeingCriteria(robot_radius_m=0.31))
+    drivable = true_floor_map(world.truth(world.target), SeeingCriteria(robot_radius_m=DRIVE_CLEARANCE_M))
     reach = grid_planner.distance_field(drivable, world.start[:2])
     for x, y, _ in robot_starts(world, 5)[1:]:  # the first is the world's own
         assert np.isfinite(reach[int(x / 0.05), int(y / 0.05)]), (name, (x, y), "a pocket the robot cannot leave")
@@ -81,7 +81,7 @@ def test_derived_starts_keep_their_margin_from_every_obstacle_however_thin(name)
 @pytest.mark.parametrize("name", ["paper-lab", "office", "high-shelf"])
 def test_every_placement_is_seen_from_somewhere_the_robot_can_drive_to(name):
     world = load_facts(name)  # office's west desks face a pocket between desks and chairs: left out
-    drive = SeeingCriteria(robot_radius_m=0.31)
+    drive = SeeingCriteria(robot_radius_m=DRIVE_CLEARANCE_M)
     for placement in target_placements(world, 4):
         assert math.isfinite(viewpoint(world.truth(placement), world.start[:2], drive)[1]), placement
 
