@@ -1,0 +1,14 @@
+"""The planner's side of syt, on the workstation.
+
+Subpackages, in the order they may import each other (a test enforces it):
+
+- ``robot``: talking to the onboard agent over Zenoh (:class:`RobotClient`, a scripted tour);
+- ``perception``: stereo, the occupancy grid, target detection and its measured detectability;
+- ``planning``: the SYT planner itself, pure (target belief, detection function, actions, priors);
+- ``navigation``: driving on the mapped floor (Dijkstra, TangentBug, scan-matched localisation);
+- ``search``: the search loop that ties them together, one run, the Rerun recording, the top view;
+- ``experiments``: sweeps of searches over worlds, baselines, the report;
+- ``bench``: the benchmarks.
+
+Everything here imports ``shared``, never ``onboard``.
+"""

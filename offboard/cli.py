@@ -50,7 +50,7 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
 
 
 def _search(args: argparse.Namespace) -> int:
-    from offboard.search_run import SearchRequest, run_search
+    from offboard.search.run import SearchRequest, run_search
 
     request = SearchRequest(
         pictures=tuple(args.target_picture), target_size_m=args.target_size, target_sides=args.target_sides,
@@ -66,8 +66,8 @@ def _search(args: argparse.Namespace) -> int:
 # --- demo and tour ---------------------------------------------------------------------------------
 
 def _tour(args: argparse.Namespace) -> int:
-    from offboard.robot_client import RobotClient
-    from offboard.tour import run_tour
+    from offboard.robot.robot_client import RobotClient
+    from offboard.robot.tour import run_tour
 
     transport = transport_from_args(args)
     with transport.open() as session, RobotClient(session, transport.robot_id) as robot:
@@ -77,8 +77,8 @@ def _tour(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from offboard.experiment_world import load_facts
-    from offboard.search_run import SearchRequest, run_search
+    from offboard.experiments.world_facts import load_facts
+    from offboard.search.run import SearchRequest, run_search
     from shared.launch import onboard_agent
 
     out: Path = args.out
@@ -115,10 +115,10 @@ def _calibrate(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from offboard import calibration
-    from offboard.detection.detector import make_detector
-    from offboard.detection.target_model import TargetModel
-    from offboard.robot_client import RobotClient
+    from offboard.perception import calibration
+    from offboard.perception.detection.detector import make_detector
+    from offboard.perception.detection.target_model import TargetModel
+    from offboard.robot.robot_client import RobotClient
     from shared.launch import onboard_agent
 
     model = TargetModel.from_files(args.target_picture, args.target_size)
@@ -153,7 +153,7 @@ def _progress(done: int, total: int) -> None:
 # --- experiments -----------------------------------------------------------------------------------
 
 def _experiment(args: argparse.Namespace) -> int:
-    from offboard import experiment
+    from offboard.experiments import harness as experiment
 
     return experiment.main(args)
 
@@ -162,11 +162,11 @@ def _experiment(args: argparse.Namespace) -> int:
 
 def _bench(args: argparse.Namespace) -> int:
     if args.what == "planner":
-        from offboard.bench_planner import run
+        from offboard.bench.planner import run
     elif args.what == "perception":
-        from offboard.bench_perception import run
+        from offboard.bench.perception import run
     else:
-        from offboard.bench_navigation import run
+        from offboard.bench.navigation import run
     sys.stdout.write(json.dumps(run()) + "\n")
     return 0
 
@@ -197,7 +197,7 @@ def _parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--negatives", type=int, default=200, help="views without the target")
     calibrate.add_argument("--out", type=Path, required=True, metavar="FILE.json")
     calibrate.set_defaults(func=_calibrate)
-    from offboard import experiment as harness  # its options live with the harness
+    from offboard.experiments import harness  # its options live with the harness
 
     experiment = sub.add_parser("experiment", help="run a grid of searches (the report's Tables 2 and 3, baselines)")
     harness.add_arguments(experiment)

@@ -65,7 +65,7 @@ def _overrides(args: argparse.Namespace) -> dict:
 def run_agent(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     _setup_logging(args.verbose)
-    from onboard.sim.world import WorldError
+    from shared.world import WorldError
 
     try:
         config = load_config(OnboardConfig, args.config, _overrides(args))
@@ -100,7 +100,7 @@ def run_render(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     _setup_logging(False)
     from onboard.sim.preview import write_preview
-    from onboard.sim.world import WorldError
+    from shared.world import WorldError
 
     try:
         config = load_config(OnboardConfig, args.config)

@@ -3,14 +3,20 @@
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Iterator
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 
 from shared.launch import LoopbackAgent, onboard_agent
-from offboard.robot_client import RobotClient
+from offboard.perception.occupancy import FloorMap
+from offboard.robot.robot_client import RobotClient
 from shared.transport import TransportConfig
+
+RES = 0.05  # the floor maps' cell size in the navigation tests
 
 
 def client_transport(agent: LoopbackAgent, robot_id: str = "syt") -> TransportConfig:
@@ -62,3 +68,14 @@ def sim_agent(tmp_path_factory) -> Iterator[tuple[LoopbackAgent, RobotClient]]:
     """One fast-clock paper-lab agent shared by a module's tests."""
     with running_agent(tmp_path_factory.mktemp("agent"), "--world", "paper-lab") as pair:
         yield pair
+
+
+def floor_map(occupied: np.ndarray, radius_m: float = 0.0) -> FloorMap:
+    """Inflate like OccupancyGrid.floor_map (walls included) by ``radius_m``."""
+    r = int(math.ceil(radius_m / RES))
+    if r == 0:
+        return FloorMap(RES, occupied, occupied.copy(), np.zeros_like(occupied))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    padded = np.pad(occupied, r, constant_values=True).astype(np.uint8)
+    blocked = cv2.dilate(padded, disc)[r:-r, r:-r].astype(bool)
+    return FloorMap(RES, occupied, blocked, np.zeros_like(occupied))

@@ -1,4 +1,5 @@
-"""The folder layout is the architecture: onboard and offboard meet only in shared."""
+"""The folder layout is the architecture: onboard and offboard meet only in shared, and inside
+offboard each subpackage imports only the ones below it (see each package's ``__init__``)."""
 
 import ast
 from pathlib import Path
@@ -8,16 +9,37 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 FORBIDDEN = {"onboard": {"offboard"}, "offboard": {"onboard"}, "shared": {"onboard", "offboard"}}
 
+# offboard subpackage -> the offboard subpackages it may import (besides itself and shared)
+OFFBOARD_LAYERS = {
+    "robot": set(),
+    "perception": {"robot"},
+    "planning": {"perception"},
+    "navigation": {"robot", "perception"},
+    "search": {"robot", "perception", "planning", "navigation"},
+    "experiments": {"robot", "perception", "planning", "navigation", "search"},
+    "bench": {"robot", "perception", "planning", "navigation", "search", "experiments"},
+}
+PURE = {"planning": {"zenoh", "rerun"}}  # the planner does no I/O: no transport, no recording
 
-def _imported_packages(path: Path) -> set[str]:
+
+def _imported_modules(path: Path) -> set[str]:
     tree = ast.parse(path.read_text(), filename=str(path))
     names = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            names |= {alias.name.split(".")[0] for alias in node.names}
+            names |= {alias.name for alias in node.names}
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names.add(node.module.split(".")[0])
+            names |= {node.module} | {f"{node.module}.{alias.name}" for alias in node.names}
     return names
+
+
+def _imported_packages(path: Path) -> set[str]:
+    return {name.split(".")[0] for name in _imported_modules(path)}
+
+
+def _offboard_subpackages(path: Path) -> set[str]:
+    return {name.split(".")[1] for name in _imported_modules(path)
+            if name.startswith("offboard.") and name.split(".")[1] in OFFBOARD_LAYERS}
 
 
 @pytest.mark.parametrize("package", sorted(FORBIDDEN))
@@ -28,7 +50,30 @@ def test_packages_import_only_what_the_architecture_allows(package):
     assert {f: bad for f, bad in offenders.items() if bad} == {}
 
 
-def test_the_checker_sees_a_forbidden_import(tmp_path):
+@pytest.mark.parametrize("layer", sorted(OFFBOARD_LAYERS))
+def test_offboard_layers_import_only_those_below(layer):
+    files = sorted((ROOT / "offboard" / layer).rglob("*.py"))
+    assert files, f"no sources found under offboard/{layer}/"
+    allowed = OFFBOARD_LAYERS[layer] | {layer}
+    offenders = {str(f.relative_to(ROOT)): sorted(_offboard_subpackages(f) - allowed) for f in files}
+    assert {f: bad for f, bad in offenders.items() if bad} == {}
+
+
+@pytest.mark.parametrize("layer", sorted(PURE))
+def test_pure_layers_do_no_io(layer):
+    files = sorted((ROOT / "offboard" / layer).rglob("*.py"))
+    offenders = {str(f.relative_to(ROOT)): sorted(_imported_packages(f) & PURE[layer]) for f in files}
+    assert {f: bad for f, bad in offenders.items() if bad} == {}
+
+
+def test_offboard_top_level_holds_at_most_three_modules():
+    modules = sorted(p.name for p in (ROOT / "offboard").glob("*.py"))
+    assert len(modules) <= 3, modules
+
+
+def test_the_checker_sees_forbidden_imports(tmp_path):
     bad = tmp_path / "x.py"
-    bad.write_text("from offboard.robot_client import RobotClient\nimport onboard.agent\n")
+    bad.write_text("from offboard.robot.robot_client import RobotClient\nimport onboard.agent\n"
+                   "from offboard.search import loop\n")
     assert _imported_packages(bad) == {"offboard", "onboard"}
+    assert _offboard_subpackages(bad) == {"robot", "search"}

@@ -16,7 +16,7 @@ import numpy as np
 from onboard.config import OdometryNoise
 from onboard.devices import BaseReading, MotionOutcome
 from onboard.sim.clock import SimClock
-from onboard.sim.world import World
+from shared.world import World
 from shared.geometry import Pose2D, wrap_angle
 from shared.limits import BaseLimits
 

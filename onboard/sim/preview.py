@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from onboard.sim.render import StereoRenderer
-from onboard.sim.world import World
+from shared.world import World
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 
 log = logging.getLogger(__name__)

@@ -22,7 +22,7 @@ import numba
 import numpy as np
 
 from onboard.sim import textures
-from onboard.sim.world import World
+from shared.world import World
 from shared.geometry import HeadMount, Intrinsics, Pose2D, RigidTransform
 
 TILE_PX = 16

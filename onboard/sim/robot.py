@@ -13,7 +13,7 @@ from onboard.sim.base import SimBase
 from onboard.sim.clock import SimClock
 from onboard.sim.pantilt import SimPanTilt
 from onboard.sim.render import StereoRenderer
-from onboard.sim.world import World, WorldError
+from shared.world import World, WorldError
 from shared.geometry import Pose2D
 from shared.limits import CameraTiming
 

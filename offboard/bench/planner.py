@@ -1,0 +1,76 @@
+"""``syt-offboard bench planner --json``: what one decision and one Bayes update cost, as medians.
+
+The room is the report's (9 × 5 × 2.5 m, 32 candidate positions × 17 settings = 544 actions). The
+map holds what a few stereo frames of walls and furniture would put there, the belief a hints
+prior, so that sensed spheres are not all empty. A decision includes the navigation distances to
+the candidates, the sensed spheres at all of them, and scoring every action.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from offboard.navigation import grid_planner
+from offboard.planning.belief import TargetBelief
+from offboard.perception.detectability import DetectabilityTable
+from offboard.planning.detection_function import look_footprint, visible_depth
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.planning.planner import PlannerConfig, SearchPlanner
+from offboard.planning.priors import HintBox, hints
+from offboard.planning.time_model import TimeModel
+from offboard.perception.voxel_grid import VoxelGrid
+from shared.timing import median_ms
+from shared.geometry import HeadMount, Intrinsics, Pose2D
+from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
+
+log = logging.getLogger(__name__)
+
+ROOM_M = (9.0, 5.0, 2.5)
+K = Intrinsics.from_fov(640, 480, 66.0)
+MOUNT = HeadMount()
+TABLES = (HintBox((1.0, 4.3, 0.75), (2.4, 5.0, 1.05), 0.45), HintBox((3.9, 2.27, 0.75), (5.1, 2.73, 1.05), 0.45))
+
+
+def _scenario(resolution_m: float) -> tuple[SearchPlanner, OccupancyGrid]:
+    grid = VoxelGrid(ROOM_M, resolution_m)
+    occupancy = OccupancyGrid(grid)
+    for x, y, heading, depth in ((4.5, 0.6, 90, 1.7), (4.5, 0.6, 0, 4.0), (4.5, 0.6, 180, 4.0), (2.0, 2.5, 90, 2.0)):
+        cam = MOUNT.camera_in_world(Pose2D(x, y, math.radians(heading)), 0.0, 0.0)
+        occupancy.integrate_disparity(np.full((480, 640), K.fx_px * MOUNT.baseline_m / depth, np.float32), K,
+                                      MOUNT.baseline_m, cam)
+    belief = TargetBelief(grid, coarse_factor=max(1, round(0.2 / resolution_m)))
+    belief.set_prior(hints(grid, TABLES), prob_outside=0.05)
+    planner = SearchPlanner(belief, PlannerConfig(), DetectabilityTable.nominal(),
+                            TimeModel(BaseLimits(), PanTiltLimits(), CameraTiming()), K, MOUNT)
+    return planner, occupancy
+
+
+def _decide(planner: SearchPlanner, occupancy: OccupancyGrid, pose: Pose2D):
+    floor = occupancy.floor_map(0.26, 1.35)
+    field = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
+    paths = grid_planner.distances_at(floor, field, planner.positions)
+    return planner.decide(pose, 0.0, 0.0, 0.0, occupancy, paths)
+
+
+def _update(planner: SearchPlanner, occupancy: OccupancyGrid, pose: Pose2D) -> None:
+    cam = MOUNT.camera_in_world(pose, 0.0, 0.0)
+    depth = visible_depth(None, occupancy, cam, K, MOUNT.baseline_m, 16, planner.table.range_m[1])
+    fp = look_footprint(occupancy.grid, cam, K, depth, 16, planner.table, planner.belief.facing_azimuths_rad, 0.15)
+    planner.belief.update_after_miss(fp.cube_index, fp.detection_prob)
+
+
+def run(repeats: int = 15) -> dict:
+    pose = Pose2D(4.5, 0.6, math.pi / 2)
+    figures: dict[str, float | int] = {}
+    for resolution, key in ((0.05, "decision_ms"), (0.10, "decision_ms_10cm"), (0.025, "decision_ms_2_5cm")):
+        log.info("planner at %g cm", resolution * 100)
+        planner, occupancy = _scenario(resolution)
+        figures[key] = median_ms(lambda: _decide(planner, occupancy, pose), repeats)
+        if resolution == 0.05:
+            figures["update_ms"] = median_ms(lambda: _update(planner, occupancy, pose), repeats)
+            figures["actions"] = planner.action_count
+            figures["cubes"] = occupancy.grid.num_cubes
+    return figures

@@ -1,0 +1,253 @@
+"""Baseline search policies for the experiments: the same robot and scenarios, other choices.
+
+Each baseline implements the :class:`~offboard.search.loop.Policy` protocol and returns the planner's own
+:class:`~offboard.planning.planner.Decision` objects, so :class:`~offboard.search.loop.Search` drives it exactly as
+it drives SYT:
+
+- ``exhaustive``: look around here, then every candidate position, nearest (by path) first;
+- ``random``: look around here, then a random reachable candidate (seeded), and so on;
+- ``frontier``: the nearest candidate next to unknown floor, else the nearest unvisited one;
+- ``oracle``: drive to the closest floor position that sees the target well and look straight at it
+  (it is given the truth).
+
+"Look around" takes every camera setting of the planner once, quickest to reach first. A weak
+detection needs a second look before the search ends; once a detection has collapsed the belief onto
+one spot the tours let the SYT planner choose that look, so confirming is not what the comparison
+measures.
+
+Registry: :data:`BASELINES` maps a name to a maker taking the run's :class:`BaselineContext` (seed,
+truth) and returning the factory ``(planner) -> Policy`` that :func:`offboard.search.run.run_search`
+takes.
+
+The oracle drives by :func:`offboard.experiments.world_facts.viewpoint`, the same geometry the harness
+measures SPL's shortest path with.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from offboard.navigation import grid_planner
+from offboard.experiments.world_facts import SeeingCriteria, Truth, true_floor_map, viewpoint
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.planning.planner import Decision, SearchPlanner
+from offboard.search.loop import Policy
+from shared.geometry import Pose2D
+from shared.strict import bounds
+
+PolicyFactory = Callable[[SearchPlanner], Policy]
+
+
+# --- the policies ----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class BaselineConfig:
+    # a coarse block holding this much of the belief: a detection collapsed it (priors never come close)
+    collapsed_mass: float = field(default=0.1, metadata=bounds(0.0, 1.0))
+    frontier_radius_m: float = field(default=0.75, metadata=bounds(0.05, 10.0))  # "adjacent" to unknown floor
+    oracle_looks: int = field(default=3, metadata=bounds(1, 100))  # looks at the target before giving up
+    oracle_moves: int = field(default=2, metadata=bounds(1, 100))  # tries to reach the viewpoint
+    arrived_m: float = field(default=0.25, metadata=bounds(0.0, 5.0))  # near enough to the viewpoint
+    # where the oracle looks from: nearer to head-on than SPL's "sees the target" (0.5-2.5 m, 60°), whose
+    # closest positions are so close and oblique that the detector misses
+    oracle_view: SeeingCriteria = SeeingCriteria(range_m=2.0, near_m=1.0, max_off_normal_deg=45.0)
+
+
+@dataclass(frozen=True)
+class BaselineContext:
+    """What a run gives its baseline: the run's seed, and the truth (the oracle's only)."""
+
+    seed: int = 0
+    truth: Truth | None = None
+    config: BaselineConfig = BaselineConfig()
+
+
+def _within_budget(planner: SearchPlanner, decision: Decision, elapsed_s: float) -> Decision:
+    if decision.kind != "stop" and elapsed_s + decision.time_s > planner.config.budget_s:
+        return Decision("stop", f"the next action ({decision.time_s:.1f} s) would exceed the budget "
+                                f"K = {planner.config.budget_s:g} s", status="budget")
+    return decision
+
+
+class _Tour:
+    """Look around (every setting once, quickest first), then move where :meth:`_choose` says."""
+
+    name = "tour"
+
+    def __init__(self, planner: SearchPlanner, config: BaselineConfig):
+        self.planner, self.config = planner, config
+        self.visited = np.zeros(len(planner.positions), bool)
+
+    def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
+               path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
+        decision = (self._confirm(pose, pan_rad, tilt_rad, elapsed_s, occupancy, path_lengths_m, taken)
+                    or self._look_around(pose, pan_rad, tilt_rad, taken)
+                    or self._next_position(pose, occupancy, np.asarray(path_lengths_m, float)))
+        return _within_budget(self.planner, decision, elapsed_s)
+
+    def _confirm(self, *args) -> Decision | None:
+        """SYT's choice while a weak detection waits to be confirmed (the belief collapsed onto it)."""
+        if self.planner.belief.coarse_mass().sum(axis=-1).max() < self.config.collapsed_mass:
+            return None
+        decision = self.planner.decide(*args)
+        return None if decision.kind == "stop" else decision
+
+    def _look_around(self, pose: Pose2D, pan_rad: float, tilt_rad: float, taken: frozenset[int]) -> Decision | None:
+        here = np.hypot(*(self.planner.positions - (pose.x_m, pose.y_m)).T) <= self.planner.config.same_position_m
+        self.visited |= here
+        settings = self.planner.settings
+        left = np.array([s for s in range(len(settings)) if s not in taken], int)
+        if len(left) == 0:
+            return None
+        times = self.planner.time_model.look_times_s(pose.heading_rad, pan_rad, tilt_rad,
+                                                     settings.azimuth_rad[left], settings.tilt_rad[left])
+        k = int(np.argmin(times))
+        s = int(left[k])
+        return Decision("look", f"{self.name}: look around, {len(left) - 1} settings left here",
+                        float(settings.azimuth_rad[s]), float(settings.tilt_rad[s]), time_s=float(times[k]), setting=s)
+
+    def _next_position(self, pose: Pose2D, occupancy: OccupancyGrid, paths: np.ndarray) -> Decision:
+        available = np.isfinite(paths) & ~self.visited
+        if not available.any():
+            return Decision("stop", f"{self.name}: every reachable position has been looked around",
+                            status="exhausted")
+        j, why = self._choose(pose, occupancy, paths, available)
+        self.visited[j] = True
+        return self._move_to(pose, j, paths[j], why)
+
+    def _choose(self, pose: Pose2D, occupancy: OccupancyGrid, paths: np.ndarray,
+                available: np.ndarray) -> tuple[int, str]:
+        return _nearest(paths, available), "the nearest unvisited position"
+
+    def _move_to(self, pose: Pose2D, j: int, path_m: float, why: str) -> Decision:
+        x, y = (float(v) for v in self.planner.positions[j])
+        settings, model = self.planner.settings, self.planner.time_model
+        arrival = math.atan2(y - pose.y_m, x - pose.x_m)  # heading on arrival: the direction of travel
+        looks = model.look_times_s(arrival, 0.0, 0.0, settings.azimuth_rad, settings.tilt_rad)
+        s = int(np.argmin(looks))
+        travel = model.travel_s(path_m, pose.bearing_to(x, y) if pose.distance_to(x, y) > 1e-6 else 0.0)
+        return Decision("move", f"{self.name}: {why} ({x:g}, {y:g}), {path_m:.1f} m away",
+                        float(settings.azimuth_rad[s]), float(settings.tilt_rad[s]), (x, y),
+                        time_s=float(travel + looks[s]), setting=s)
+
+
+def _nearest(paths: np.ndarray, available: np.ndarray) -> int:
+    return int(np.argmin(np.where(available, paths, np.inf)))
+
+
+class Exhaustive(_Tour):
+    name = "exhaustive"
+
+
+class RandomTour(_Tour):
+    name = "random"
+
+    def __init__(self, planner: SearchPlanner, config: BaselineConfig, seed: int):
+        super().__init__(planner, config)
+        self.rng = np.random.default_rng(seed)
+
+    def _choose(self, pose: Pose2D, occupancy: OccupancyGrid, paths: np.ndarray,
+                available: np.ndarray) -> tuple[int, str]:
+        return int(self.rng.choice(np.flatnonzero(available))), "a random reachable position"
+
+
+class Frontier(_Tour):
+    name = "frontier"
+
+    def _choose(self, pose: Pose2D, occupancy: OccupancyGrid, paths: np.ndarray,
+                available: np.ndarray) -> tuple[int, str]:
+        near_unknown = available & self._near_frontier(occupancy)
+        if near_unknown.any():
+            return _nearest(paths, near_unknown), "the nearest position next to unknown floor"
+        return _nearest(paths, available), "no frontier left: the nearest unvisited position"
+
+    def _near_frontier(self, occupancy: OccupancyGrid) -> np.ndarray:
+        """Candidates within ``frontier_radius_m`` of a frontier cell (known free floor beside unknown)."""
+        base = self.planner.time_model.base
+        floor = occupancy.floor_map(base.radius_m, base.height_m)
+        unknown = floor.unknown.astype(np.uint8)
+        beside_unknown = cv2.dilate(unknown, np.ones((3, 3), np.uint8)).astype(bool)
+        frontier = beside_unknown & ~floor.unknown & ~floor.blocked
+        if not frontier.any():
+            return np.zeros(len(self.planner.positions), bool)
+        to_frontier = cv2.distanceTransform((~frontier).astype(np.uint8), cv2.DIST_L2, 5) * floor.resolution_m
+        cells = np.floor(self.planner.positions / floor.resolution_m).astype(int)
+        cells = np.clip(cells, 0, np.array(to_frontier.shape) - 1)
+        return to_frontier[cells[:, 0], cells[:, 1]] <= self.config.frontier_radius_m
+
+
+class Oracle:
+    """Knows where the target is: drives to the closest position that sees it and looks at it."""
+
+    def __init__(self, planner: SearchPlanner, truth: Truth, config: BaselineConfig):
+        self.planner, self.truth, self.config = planner, truth, config
+        self.goal: tuple[float, float] | None = None
+        self.moves = self.looks = 0
+
+    def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
+               path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
+        if self.goal is None:
+            self.goal, _ = viewpoint(self.truth, (pose.x_m, pose.y_m), self.config.oracle_view)
+        if self.goal is None:
+            return Decision("stop", "oracle: no reachable position sees the target", status="exhausted")
+        away = pose.distance_to(*self.goal) > self.config.arrived_m
+        if away and self.moves < self.config.oracle_moves:
+            self.moves += 1
+            return _within_budget(self.planner, self._move(pose), elapsed_s)
+        if self.looks >= self.config.oracle_looks:
+            return Decision("stop", f"oracle: {self.looks} looks at the target did not find it", status="exhausted")
+        self.looks += 1
+        return _within_budget(self.planner, self._look_from(pose, pan_rad, tilt_rad, 0.0), elapsed_s)
+
+    def _move(self, pose: Pose2D) -> Decision:
+        gx, gy = self.goal
+        floor = true_floor_map(self.truth, self.config.oracle_view)
+        field_m = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
+        path = float(grid_planner.distances_at(floor, field_m, np.array([self.goal]))[0])
+        travel = self.planner.time_model.travel_s(path, pose.bearing_to(gx, gy))
+        look = self._look_from(Pose2D(gx, gy, math.atan2(gy - pose.y_m, gx - pose.x_m)), 0.0, 0.0, travel)
+        return Decision("move", f"oracle: to the viewpoint ({gx:.2f}, {gy:.2f}), {path:.1f} m",
+                        look.azimuth_rad, look.tilt_rad, (gx, gy), time_s=look.time_s, setting=look.setting)
+
+    def _look_from(self, pose: Pose2D, pan_rad: float, tilt_rad: float, travel_s: float) -> Decision:
+        """Straight at the target's centre from ``pose``; the setting recorded is the nearest one."""
+        tx, ty, tz = self.truth.target_center_m
+        azimuth = math.atan2(ty - pose.y_m, tx - pose.x_m)
+        limits = self.planner.time_model.pantilt
+        tilt = math.atan2(tz - self.planner.mount.height_m, math.hypot(tx - pose.x_m, ty - pose.y_m))
+        tilt = min(max(tilt, math.radians(limits.tilt_min_deg)), math.radians(limits.tilt_max_deg))
+        plan = self.planner.time_model.look(pose.heading_rad, pan_rad, tilt_rad, azimuth, tilt)
+        settings = self.planner.settings
+        gap = np.abs(np.angle(np.exp(1j * (settings.azimuth_rad - azimuth)))) + np.abs(settings.tilt_rad - tilt)
+        return Decision("look", "oracle: straight at the target", azimuth, tilt, time_s=travel_s + plan.time_s,
+                        setting=int(np.argmin(gap)))
+
+
+# --- the registry ----------------------------------------------------------------------------------
+
+def _exhaustive(context: BaselineContext) -> PolicyFactory:
+    return lambda planner: Exhaustive(planner, context.config)
+
+
+def _random(context: BaselineContext) -> PolicyFactory:
+    return lambda planner: RandomTour(planner, context.config, context.seed)
+
+
+def _frontier(context: BaselineContext) -> PolicyFactory:
+    return lambda planner: Frontier(planner, context.config)
+
+
+def _oracle(context: BaselineContext) -> PolicyFactory:
+    if context.truth is None:
+        raise ValueError("the oracle baseline needs the truth (the target's real position)")
+    return lambda planner: Oracle(planner, context.truth, context.config)
+
+
+BASELINES: dict[str, Callable[[BaselineContext], PolicyFactory]] = {
+    "exhaustive": _exhaustive, "random": _random, "frontier": _frontier, "oracle": _oracle,
+}

@@ -1,0 +1,521 @@
+"""``syt-offboard experiment``: a grid of full searches, each against its own simulated robot (report §5.2).
+
+The grid is worlds × robot starts × target placements × cost functions × priors × seeds × methods
+(``syt`` and the baselines of :mod:`offboard.experiments.baselines`, which ignore the cost function and so run
+once per start × target × prior). ``--preset paper`` is the report's 160 runs on ``paper-lab``.
+
+``--jobs`` worker processes (``python -m offboard.experiments.harness --serve``) run at once, each with its own
+onboard agent on its own loopback port. A worker takes run after run: it resets its simulated robot
+for the run (``sim/reset``: the run's start, target placement and noise seed, so a run gives the same
+numbers whichever worker runs it, in whatever order) and runs :func:`offboard.search.run.run_search`
+with a fresh planner; a run that fails gets the worker a fresh agent. Every finished run appends a
+row to ``results.csv`` at once, so an interrupted sweep resumes where it stopped (rows are keyed by
+the run; failed runs are tried again). Logs: ``runs/<run>/search.log`` per run,
+``workers/worker-<k>/{worker,onboard}.log`` per worker.
+
+The harness is the experimenter: it reads the world file (:mod:`offboard.experiments.world_facts`; offboard
+code never imports the simulator) to place the robot and the target, to write the ``tables`` prior,
+and to measure the estimate's error and SPL's shortest path. The planner sees none of it. Success is
+"found, and the estimate within :data:`SUCCESS_RADIUS_M` of the true centre".
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import hashlib
+import itertools
+import json
+import logging
+import math
+import os
+import queue
+import select
+import signal
+import subprocess
+import sys
+import threading
+import time
+import tomllib
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from offboard.experiments.baselines import BASELINES, BaselineContext
+from offboard.experiments.report import append_row, finished_keys, write_report
+from offboard.experiments.world_facts import (Placement, Start, WorldFacts, load_facts, robot_starts, tables_hints,
+                                       target_placements, viewpoint)
+from offboard.search.loop import SearchConfig
+from shared.arguments import floats, probability
+from shared.config import load_config
+
+log = logging.getLogger(__name__)
+
+SUCCESS_RADIUS_M = 0.5  # a "found" whose estimate is farther from the truth is a false detection
+
+
+# --- the grid --------------------------------------------------------------------------------------
+
+def _fmt(values: tuple[float, ...]) -> str:
+    return ",".join(f"{v:g}" for v in values)
+
+
+@dataclass(frozen=True)
+class Run:
+    method: str  # "syt" or a baseline's name
+    world: str
+    start: Start
+    target: Placement
+    cost: int | None  # None for baselines (the cost function is SYT's)
+    prior: str  # "uniform" or "tables"
+    seed: int
+
+    def fields(self) -> dict[str, str]:
+        return {"method": self.method, "world": self.world, "start": _fmt(self.start), "target": _fmt(self.target),
+                "cost": "" if self.cost is None else str(self.cost), "prior": self.prior, "seed": str(self.seed)}
+
+    @property
+    def key(self) -> str:
+        return "|".join(self.fields().values())
+
+    @property
+    def slug(self) -> str:
+        tag = hashlib.sha1(self.key.encode()).hexdigest()[:10]
+        return f"{self.method}-{self.cost or 'x'}-{self.prior}-{self.seed}-{tag}"
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    worlds: tuple[str, ...] = ("paper-lab",)
+    starts: int = 5
+    targets: int = 4
+    costs: tuple[int, ...] = (1, 2, 3, 4)
+    priors: tuple[str, ...] = ("uniform", "tables")
+    seeds: tuple[int, ...] = (0,)
+    methods: tuple[str, ...] = ("syt",)
+    start_overrides: tuple[Start, ...] = ()  # replace the derived starts (every world)
+    target_overrides: tuple[Placement, ...] = ()
+
+
+PAPER = GridSpec()
+BASELINE_METHODS = tuple(BASELINES)
+
+
+def build_runs(spec: GridSpec) -> list[Run]:
+    """The grid in a fixed order (``--limit`` takes its head): per world, seed, start, target, prior, method."""
+    runs = []
+    for name in spec.worlds:
+        world = load_facts(name)
+        starts = list(spec.start_overrides) or robot_starts(world, spec.starts)
+        targets = list(spec.target_overrides) or target_placements(world, spec.targets)
+        for seed, start, target, prior, method in itertools.product(spec.seeds, starts, targets, spec.priors,
+                                                                     spec.methods):
+            costs = spec.costs if method == "syt" else (None,)  # the cost function is SYT's alone
+            runs += [Run(method, name, start, target, c, prior, seed) for c in costs]
+    return runs
+
+
+# --- results.csv rows ------------------------------------------------------------------------------
+
+def make_row(run: Run, world: WorldFacts, summary: dict | None, run_wall_s: float, error: str = "") -> dict:
+    """A results.csv row: the run, its summary (``None`` if it crashed), the estimate's error, SPL."""
+    truth = world.truth(run.target)
+    _, shortest = viewpoint(truth, run.start[:2])
+    row = {**run.fields(), "key": run.key, "run_wall_s": round(run_wall_s, 2),
+           "shortest_path_m": round(shortest, 3) if math.isfinite(shortest) else ""}
+    if summary is None:
+        return {**row, "found": False, "status": f"error: {error}"[:300], "success": False, "spl": 0.0, "error": error}
+    row.update({k: v for k, v in summary.items() if k != "prior"}, prior_spec=summary.get("prior", ""))
+    row["target_estimate_m"] = json.dumps(summary.get("target_estimate_m"))
+    estimate = summary.get("target_estimate_m")
+    err = float(np.linalg.norm(np.array(estimate) - truth.target_center_m)) if summary["found"] and estimate else None
+    success = err is not None and err <= SUCCESS_RADIUS_M
+    longest = max(float(summary["distance_m"]), shortest) if math.isfinite(shortest) else 0.0
+    spl = (shortest / longest if longest > 0 else 1.0) if success and math.isfinite(shortest) else 0.0
+    return {**row, "estimate_error_m": "" if err is None else round(err, 3), "success": success, "spl": round(spl, 4)}
+
+
+# --- the workers: long-lived processes, each with its own simulated robot -------------------------
+
+@dataclass(frozen=True)
+class WorkerSpec:
+    run: dict  # Run as a dict
+    world_path: str
+    picture: str
+    prior_spec: str
+    budget_s: float
+    out_dir: str
+    move_threshold: float | None = None  # Θ_move; None: the planner's default
+    config_path: str | None = None  # SearchConfig TOML for every run; None: the defaults
+
+
+class _RunWorker:
+    """The worker side (``python -m offboard.experiments.harness --serve``): one onboard agent, kept for run
+    after run in the same world and reset between them (``sim/reset``: start, target placement and
+    noise seed; the planner starts afresh each run), and the detectors, built once. That saves the
+    agent's and the planner's start-up, several seconds a run."""
+
+    def __init__(self, log_dir: Path):
+        self._log_dir = log_dir
+        self._agent_world: str | None = None
+        self._agent_stack = contextlib.ExitStack()
+        self._transport = None
+        self._detectors: dict = {}
+
+    def run(self, spec: WorkerSpec) -> dict:
+        """Reset the robot for the run, search, write ``out_dir/summary.json``; the summary."""
+        from offboard.robot.robot_client import RobotClient
+        from offboard.search.run import SearchRequest, run_search
+
+        run = Run(**{**spec.run, "start": tuple(spec.run["start"]), "target": tuple(spec.run["target"])})
+        world = load_facts(spec.world_path)
+        transport = self._agent(spec.world_path)
+        with transport.open() as session, RobotClient(session, "syt") as robot:
+            robot.sim_reset(run.start, run.target, run.seed)
+        policy = None
+        if run.method != "syt":
+            policy = BASELINES[run.method](BaselineContext(seed=run.seed, truth=world.truth(run.target)))
+        request = SearchRequest(pictures=(Path(spec.picture),), target_size_m=world.target_size_m,
+                                target_sides=world.target_sides, room_m=world.room_m,
+                                cost=run.cost or 3, priors=(spec.prior_spec,), budget_s=spec.budget_s,
+                                move_threshold=spec.move_threshold,
+                                config_path=None if spec.config_path is None else Path(spec.config_path),
+                                out_dir=Path(spec.out_dir), record=False)
+        return run_search(transport, request, policy, self._detectors)
+
+    def close(self) -> None:
+        """Stop the agent; the next run (after a failed one: its state is not to be trusted) starts a fresh one."""
+        self._agent_stack.close()
+        self._agent_world = None
+
+    def _agent(self, world_path: str):
+        from shared.launch import onboard_agent
+        from shared.transport import TransportConfig
+
+        if self._agent_world != world_path:
+            self.close()
+            agent = self._agent_stack.enter_context(onboard_agent(["--backend", "sim", "--world", world_path],
+                                                                  self._log_dir / "onboard.log"))
+            self._transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
+            with self._transport.open() as session:
+                agent.wait_ready(session, "syt")
+            self._agent_world = world_path
+        return self._transport
+
+
+def _serve(log_dir: Path) -> int:
+    """The worker's loop: a spec path per line on stdin; per run, one line on stdout: ``ok`` or
+    ``error: ...``. Ends at end of input."""
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.getLogger().handlers[0].setLevel(logging.WARNING)  # each run's search.log keeps the details
+    with contextlib.closing(_RunWorker(log_dir)) as worker:
+        for line in sys.stdin:
+            try:
+                worker.run(WorkerSpec(**json.loads(Path(line.strip()).read_text())))
+                answer = "ok"
+            except Exception as exc:  # the run failed, not the worker: report it, start the next afresh
+                log.exception("run %s failed", line.strip())
+                answer = f"error: {type(exc).__name__}: {exc}".replace("\n", " ")
+                worker.close()
+            sys.stdout.write(answer + "\n")
+            sys.stdout.flush()
+    return 0
+
+
+# --- the sweep -------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class SweepSettings:
+    out: Path
+    jobs: int = field(default_factory=lambda: os.cpu_count() or 1)
+    budget_s: float = 1800.0
+    run_timeout_s: float = 3600.0  # wall clock, per run
+    move_threshold: float | None = None  # Θ_move for every SYT run (a sweep of its own: use its own --out)
+    config_path: Path | None = None  # SearchConfig TOML for every run (likewise)
+
+
+@dataclass
+class Progress:
+    total: int
+    skipped: int
+    done: int = 0
+    failed: int = 0
+    started: float = field(default_factory=time.monotonic)
+
+    def eta_s(self) -> float:
+        finished = self.done + self.failed
+        left = self.total - self.skipped - finished
+        return math.inf if finished == 0 else (time.monotonic() - self.started) / finished * left
+
+
+class _WorkerProcess:
+    """The sweep's handle on one worker process (in its own process group, with its agent)."""
+
+    def __init__(self, log_dir: Path, env: dict):
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.log_path = log_dir / "worker.log"
+        self._log = self.log_path.open("a")
+        self.proc = subprocess.Popen([sys.executable, "-m", "offboard.experiments.harness", "--serve", str(log_dir)],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, text=True,
+                                     start_new_session=True, env=env)
+
+    def run(self, spec_path: Path, timeout_s: float) -> str:
+        """``ok``, ``error: ...``, ``timeout`` or ``died: ...`` (then this worker is finished)."""
+        try:
+            self.proc.stdin.write(f"{spec_path}\n")
+            self.proc.stdin.flush()
+        except BrokenPipeError:
+            return self._died()
+        ready, _, _ = select.select([self.proc.stdout], [], [], timeout_s)
+        if not ready:
+            self.kill()
+            return "timeout"
+        answer = self.proc.stdout.readline().strip()
+        return answer or self._died()
+
+    def _died(self) -> str:
+        self.proc.wait()
+        tail = self.log_path.read_text().strip().splitlines()[-1:] or ["no output"]
+        return f"died: exit {self.proc.returncode}: {tail[0]}"
+
+    @property
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def kill(self, sig: int = signal.SIGKILL) -> None:
+        if self.alive:
+            os.killpg(self.proc.pid, sig)
+        self.proc.wait()
+
+    def close(self) -> None:
+        """End of input: the worker stops its agent and exits."""
+        try:
+            self.proc.stdin.close()
+            self.proc.wait(timeout=30)
+        except (subprocess.TimeoutExpired, BrokenPipeError):
+            self.kill()
+        self._log.close()
+
+
+class _Workers:
+    """``jobs`` long-lived worker processes, each lent to one run at a time; stopped together on Ctrl-C."""
+
+    def __init__(self, jobs: int, log_dir: Path):
+        self.lock, self.stopping = threading.Lock(), False
+        # the runs share the cores: one numba thread per worker when there are as many workers as cores
+        threads = str(max(1, (os.cpu_count() or 1) // max(jobs, 1)))
+        self.env = {**os.environ, "NUMBA_NUM_THREADS": threads, "OMP_NUM_THREADS": threads}
+        self.log_dir = log_dir
+        self.idle: queue.Queue[int] = queue.Queue()
+        for index in range(jobs):
+            self.idle.put(index)
+        self.processes: dict[int, _WorkerProcess] = {}
+
+    def run(self, spec_path: Path, timeout_s: float) -> str | None:
+        """The worker's answer for this run (see :meth:`_WorkerProcess.run`); None if the sweep stops."""
+        index = self.idle.get()
+        try:
+            with self.lock:
+                if self.stopping:
+                    return None
+                process = self.processes.get(index)
+                if process is None or not process.alive:
+                    process = self.processes[index] = _WorkerProcess(self.log_dir / f"worker-{index}", self.env)
+            return process.run(spec_path, timeout_s)
+        finally:
+            self.idle.put(index)
+
+    def close(self) -> None:
+        for process in self.processes.values():
+            process.close()
+
+    def stop(self) -> None:
+        with self.lock:
+            self.stopping = True
+            for process in self.processes.values():
+                process.kill(signal.SIGTERM)  # the worker and its agent (which stops its base on SIGTERM)
+
+
+def _prepare(runs: list[Run], out: Path) -> dict[str, tuple[WorldFacts, Path, Path]]:
+    """Per world: its facts, the target's picture for the planner, the tables hints file."""
+    prepared = {}
+    for name in sorted({r.world for r in runs}):
+        world = load_facts(name)
+        pictures, hints = out / "pictures", out / "priors"
+        pictures.mkdir(parents=True, exist_ok=True)
+        hints.mkdir(parents=True, exist_ok=True)
+        picture = world.path.parent / world.target_picture
+        if not picture.is_file():
+            picture = pictures / f"{world.name}.png"
+            subprocess.run([sys.executable, "-m", "onboard.cli", "picture", Path(world.target_picture).stem,
+                            "--out", str(picture)], check=True, capture_output=True)
+        hint_file = hints / f"{world.name}-tables.toml"
+        if world.tables():
+            hint_file.write_text(tables_hints(world))
+        prepared[name] = (world, picture, hint_file)
+    return prepared
+
+
+def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Workers) -> dict | None:
+    world, picture, hint_file = prepared[run.world]
+    run_dir = settings.out / "runs" / run.slug
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "summary.json").unlink(missing_ok=True)  # a leftover of an interrupted attempt
+    prior = "uniform" if run.prior == "uniform" else f"hints:{hint_file}"
+    spec = WorkerSpec(asdict(run), str(world.path), str(picture), prior, settings.budget_s, str(run_dir),
+                      settings.move_threshold, None if settings.config_path is None else str(settings.config_path))
+    (run_dir / "spec.json").write_text(json.dumps(asdict(spec), indent=2))
+    started = time.monotonic()
+    answer = workers.run(run_dir / "spec.json", settings.run_timeout_s)
+    wall = time.monotonic() - started
+    if answer is None or workers.stopping:
+        return None  # interrupted: not a result, redone on resume
+    if answer == "ok" and (run_dir / "summary.json").is_file():
+        return make_row(run, world, json.loads((run_dir / "summary.json").read_text()), wall)
+    return make_row(run, world, None, wall, answer)
+
+
+def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progress], None] | None = None) -> Progress:
+    """Run what ``results.csv`` does not hold yet; each row is appended as its run finishes."""
+    settings.out.mkdir(parents=True, exist_ok=True)
+    results = settings.out / "results.csv"
+    done = finished_keys(results)
+    todo = [r for r in runs if r.key not in done]
+    progress = Progress(total=len(runs), skipped=len(runs) - len(todo))
+    prepared = _prepare(todo, settings.out)
+    workers = _Workers(settings.jobs, settings.out / "workers")
+    if on_progress:
+        on_progress(progress)
+    with ThreadPoolExecutor(max_workers=max(1, settings.jobs)) as pool:
+        futures = [pool.submit(_execute, r, prepared, settings, workers) for r in todo]
+        try:
+            for future in as_completed(futures):
+                row = future.result()
+                if row is None:
+                    continue
+                append_row(results, row)
+                progress.failed += row["status"].startswith("error")
+                progress.done += not row["status"].startswith("error")
+                if on_progress:
+                    on_progress(progress)
+        except BaseException:
+            workers.stop()
+            pool.shutdown(cancel_futures=True)
+            raise
+    workers.close()
+    return progress
+
+
+# --- the command line ------------------------------------------------------------------------------
+
+PRESETS = {"paper": PAPER}
+PRIORS = ("uniform", "tables")
+
+
+def _list(kind: type, allowed: tuple | None = None):
+    def parse(text: str) -> tuple:
+        try:
+            values = tuple(kind(v) for v in text.split(",") if v)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list, got {text!r}") from None
+        bad = [v for v in values if allowed is not None and v not in allowed]
+        if bad or not values:
+            raise argparse.ArgumentTypeError(f"{text!r}: choose from {', '.join(map(str, allowed or ()))}")
+        return values
+    return parse
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", type=Path, default=Path("experiment-out"), metavar="DIR",
+                        help="results.csv, report.md, plots and one folder per run; a rerun resumes")
+    parser.add_argument("--preset", choices=sorted(PRESETS), default="paper",
+                        help="the grid to start from (paper: the report's 160 runs); the options below override it")
+    parser.add_argument("--baselines", action="store_true", help="add every baseline to the methods")
+    parser.add_argument("--worlds", type=_list(str), metavar="W,..", help="bundled world names or world files")
+    parser.add_argument("--costs", type=_list(int, (1, 2, 3, 4)), metavar="C,..")
+    parser.add_argument("--priors", type=_list(str, PRIORS), metavar="P,..", help="uniform, tables")
+    parser.add_argument("--seeds", type=_list(int), metavar="S,..", help="simulator seeds (and the random baseline's)")
+    parser.add_argument("--methods", type=_list(str, ("syt", *BASELINE_METHODS)), metavar="M,..",
+                        help=f"syt, {', '.join(BASELINE_METHODS)}")
+    parser.add_argument("--starts", type=int, metavar="N", help="robot starts per world (derived from the world)")
+    parser.add_argument("--targets", type=int, metavar="N", help="target placements per world (on its tables)")
+    parser.add_argument("--start", type=floats(3, "--start"), action="append", metavar="X,Y,HEADING_DEG",
+                        help="use these robot starts instead (repeatable)")
+    parser.add_argument("--target", type=floats(4, "--target"), action="append", metavar="X,Y,Z,YAW_DEG",
+                        help="use these target placements instead (repeatable)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N", help="runs at once")
+    parser.add_argument("--budget-s", type=float, default=1800.0, metavar="SECONDS", help="robot-time budget K")
+    parser.add_argument("--move-threshold", type=probability("--move-threshold"), metavar="P",
+                        help="Θ_move for the SYT runs (default: the planner's); give each value its own --out")
+    parser.add_argument("--config", type=Path, metavar="FILE.toml",
+                        help="search configuration (SearchConfig) for every run; give it its own --out")
+    parser.add_argument("--limit", type=int, metavar="N", help="only the first N runs of the grid")
+    parser.add_argument("--run-timeout-s", type=float, default=3600.0, metavar="SECONDS", help="wall clock per run")
+    parser.add_argument("--report-only", action="store_true", help="rewrite report.md and the plots from results.csv")
+
+
+def grid_from_args(args: argparse.Namespace) -> GridSpec:
+    spec = PRESETS[args.preset]
+    given = {"worlds": args.worlds, "costs": args.costs, "priors": args.priors, "seeds": args.seeds,
+             "methods": args.methods, "starts": args.starts, "targets": args.targets,
+             "start_overrides": tuple(args.start or ()), "target_overrides": tuple(args.target or ())}
+    spec = replace(spec, **{k: v for k, v in given.items() if v})
+    if args.baselines:
+        spec = replace(spec, methods=tuple(dict.fromkeys(spec.methods + BASELINE_METHODS)))
+    return spec
+
+
+def _show(progress: Progress) -> None:
+    finished = progress.skipped + progress.done + progress.failed
+    filled = int(30 * finished / max(progress.total, 1))
+    eta = progress.eta_s()
+    eta_text = "?" if not math.isfinite(eta) else f"{int(eta // 3600)}h{int(eta % 3600 // 60):02d}m{int(eta % 60):02d}s"
+    sys.stderr.write(f"\r[{'#' * filled}{'-' * (30 - filled)}] {finished}/{progress.total} runs "
+                     f"({progress.skipped} already done), {progress.failed} failed, ETA {eta_text}   ")
+    sys.stderr.flush()
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def main(args: argparse.Namespace) -> int:
+    failed, sweep_figures = 0, None
+    if not args.report_only:
+        try:
+            runs = build_runs(grid_from_args(args))
+            if args.config:
+                load_config(SearchConfig, args.config)  # refuse a broken file before any run starts
+        except (ValueError, OSError, KeyError, tomllib.TOMLDecodeError) as exc:
+            log.error("cannot start the sweep: %s", exc)
+            return 2
+        runs = runs[:args.limit] if args.limit else runs
+        log.info("%d runs into %s, %d at a time", len(runs), args.out, args.jobs)
+        started = time.monotonic()
+        signal.signal(signal.SIGTERM, _interrupt)  # stop the workers and their agents, as on Ctrl-C
+        try:
+            settings = SweepSettings(args.out, args.jobs, args.budget_s, args.run_timeout_s, args.move_threshold,
+                                     args.config)
+            progress = sweep(runs, settings, _show)
+        except KeyboardInterrupt:
+            sys.stderr.write("\ninterrupted: run the same command again to resume\n")
+            return 130
+        sys.stderr.write("\n")
+        failed, wall_s = progress.failed, time.monotonic() - started
+        log.info("%d runs done, %d failed, %d already done, in %.0f s", progress.done, failed, progress.skipped, wall_s)
+        sweep_figures = (progress.done + progress.failed, wall_s, args.jobs)
+    if not (args.out / "results.csv").is_file():
+        log.error("no results in %s: nothing to report", args.out)
+        return 2
+    for path in write_report(args.out / "results.csv", args.out, sweep_figures):
+        log.info("wrote %s", path)
+    return 0 if failed == 0 else 1
+
+
+if __name__ == "__main__":  # a worker: python -m offboard.experiments.harness --serve LOG_DIR
+    if sys.argv[1:2] != ["--serve"] or len(sys.argv) != 3:
+        sys.exit("usage: python -m offboard.experiments.harness --serve LOG_DIR (the sweep starts its workers itself)")
+    sys.exit(_serve(Path(sys.argv[2])))

@@ -1,0 +1,409 @@
+"""``results.csv`` (its columns, appending, reading) and, from it, ``report.md`` and bar charts
+(report §5.2.3, Tables 2 and 3).
+
+Actions, time and distance are averaged over successful runs (the target found, the estimate within
+:data:`~offboard.experiments.harness.SUCCESS_RADIUS_M` of the truth); success rates and SPL are over all runs.
+Each table cell shows our mean beside the report's. The report's six conclusions are checked against
+our numbers with explicit criteria (:func:`conclusions`); run on the report's own tables every check
+agrees, which the tests assert. Plots are drawn with OpenCV.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import statistics
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+COSTS = (1, 2, 3, 4)
+PRIORS = {"uniform": "No knowledge", "tables": "Knowledge"}
+METRICS = {"actions": "Number of actions", "time_min": "Total time (min.)", "distance_m": "Distance traveled (m.)"}
+# Tables 2 and 3 of the report: prior -> metric -> costs 1..4
+REPORT = {
+    "uniform": {"actions": (9.4375, 8.722, 8.45, 8.733), "time_min": (16.1875, 8.111, 6.8, 7.533),
+                "distance_m": (22.385, 8.77, 3.85, 8.0273)},
+    "tables": {"actions": (5.0, 5.5, 4.9, 4.933), "time_min": (10.4375, 5.9, 3.8, 4.333),
+               "distance_m": (13.4675, 5.9815, 3.4095, 4.14133)},
+}
+REPORT_SUCCESS = 0.91
+SAME_ACTIONS = 0.25  # conclusion 2: "no significant effect" = mean actions within this relative spread
+
+Tables = dict[str, dict[str, list[float | None]]]  # prior -> metric -> one value per cost (None: no run)
+
+
+# --- results.csv -----------------------------------------------------------------------------------
+
+RUN_COLUMNS = ("method", "world", "start", "target", "cost", "prior", "seed")
+SUMMARY_COLUMNS = ("found", "status", "actions", "positions_visited", "distance_m", "robot_time_s", "wall_time_s",
+                   "planning_ms_p50", "planning_ms_p95", "target_estimate_m", "prob_outside", "prob_inside",
+                   "success_prob", "cost_function", "detector", "decisions", "prior_spec")  # summary's "prior"
+DERIVED_COLUMNS = ("estimate_error_m", "shortest_path_m", "success", "spl", "run_wall_s", "error", "key")
+COLUMNS = RUN_COLUMNS + SUMMARY_COLUMNS + DERIVED_COLUMNS
+
+
+def finished_keys(results: Path) -> set[str]:
+    """Runs already done (a row whose status is not an error)."""
+    if not results.is_file():
+        return set()
+    with results.open(newline="") as f:
+        reader = csv.DictReader(f)
+        if tuple(reader.fieldnames or ()) != COLUMNS:
+            raise ValueError(f"{results} has other columns than this harness writes: use another --out")
+        return {row["key"] for row in reader if not row["status"].startswith("error")}
+
+
+def append_row(results: Path, row: dict) -> None:
+    """Append one run's row and flush it to disk at once (an interrupted sweep keeps it)."""
+    new = not results.is_file()
+    with results.open("a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
+        if new:
+            writer.writeheader()
+        writer.writerow(row)
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _number(text: str) -> float | None:
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) else None
+
+
+def load_results(path: Path) -> list[dict]:
+    """One row per run (the last attempt of each), with numbers and booleans parsed."""
+    with Path(path).open(newline="") as f:
+        latest = {row["key"]: row for row in csv.DictReader(f)}
+    rows = []
+    for row in latest.values():
+        parsed = {k: _number(v) if k not in ("method", "world", "start", "target", "prior", "status", "key",
+                                            "error", "detector", "prior_spec", "target_estimate_m") else v
+                  for k, v in row.items()}
+        parsed.update(found=row["found"] == "True", success=row["success"] == "True", cost=_number(row["cost"]))
+        parsed["time_min"] = None if parsed["robot_time_s"] is None else parsed["robot_time_s"] / 60
+        rows.append(parsed)
+    return rows
+
+
+def _mean(values: list) -> float | None:
+    values = [v for v in values if v is not None]
+    return statistics.fmean(values) if values else None
+
+
+def syt_tables(rows: list[dict]) -> Tables:
+    """Means over successful SYT runs for each prior, metric and cost function."""
+    out: Tables = {}
+    for prior in PRIORS:
+        cells = {c: [r for r in rows if r["method"] == "syt" and r["prior"] == prior and r["cost"] == c
+                     and r["success"]] for c in COSTS}
+        out[prior] = {m: [_mean([r[m] for r in cells[c]]) for c in COSTS] for m in METRICS}
+    return out
+
+
+# --- the six conclusions ---------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Verdict:
+    claim: str
+    agrees: bool | None  # None: some cell has no successful run
+    evidence: str
+
+
+def _fmt(v: float | None, digits: int = 2) -> str:
+    return "—" if v is None else f"{v:.{digits}f}"
+
+
+def _comparisons(pairs: list[tuple[float | None, float | None]]) -> tuple[bool | None, int]:
+    """(all a < b, how many hold); None if a value is missing."""
+    if any(a is None or b is None for a, b in pairs):
+        return None, sum(1 for a, b in pairs if a is not None and b is not None and a < b)
+    held = sum(a < b for a, b in pairs)
+    return held == len(pairs), held
+
+
+def conclusions(t: Tables) -> list[Verdict]:
+    """The report's six conclusions, each checked on ``t`` (ours, or the report's own tables)."""
+    u, k = t["uniform"], t["tables"]
+    return _knowledge_and_actions(u, k) + _two_stages(u, k) + _best(u, k)
+
+
+def _knowledge_and_actions(u: dict, k: dict) -> list[Verdict]:
+    ok1, n1 = _comparisons([(k[m][c], u[m][c]) for m in METRICS for c in range(4)])
+    spreads = []
+    for tab in (u, k):
+        a = [v for v in tab["actions"] if v is not None]
+        spreads.append((max(a) - min(a)) / statistics.fmean(a) if len(a) == 4 and statistics.fmean(a) > 0 else None)
+    ok2 = None if None in spreads else all(s <= SAME_ACTIONS for s in spreads)
+    return [
+        Verdict("Prior knowledge drastically accelerates the search (time, actions, distance).", ok1,
+                f"{n1}/12 cost×metric cells lower with knowledge; mean over costs: "
+                f"time {_fmt(_mean(u['time_min']))} → {_fmt(_mean(k['time_min']))} min, "
+                f"actions {_fmt(_mean(u['actions']))} → {_fmt(_mean(k['actions']))}, "
+                f"distance {_fmt(_mean(u['distance_m']))} → {_fmt(_mean(k['distance_m']))} m"),
+        Verdict("The cost function has no significant effect on the number of actions.", ok2,
+                f"spread (max − min) / mean of the four costs' mean actions: no knowledge {_fmt(spreads[0])}, "
+                f"knowledge {_fmt(spreads[1])} (criterion ≤ {SAME_ACTIONS:g})"),
+    ]
+
+
+def _two_stages(u: dict, k: dict) -> list[Verdict]:
+    moving = ("distance_m", "time_min")
+    ok3, n3 = _comparisons([(tab[m][c], tab[m][0]) for tab in (u, k) for m in moving for c in (1, 2, 3)])
+    ok4, n4 = _comparisons([(tab[m][c], tab[m][1]) for tab in (u, k) for m in moving for c in (2, 3)])
+    return [
+        Verdict("The two-stage search (costs 2-4) reduces distance and time against cost 1.", ok3,
+                f"{n3}/12 comparisons hold; distance cost 1 vs 2/3/4: no knowledge {_fmt(u['distance_m'][0])} vs "
+                f"{'/'.join(_fmt(v) for v in u['distance_m'][1:])} m, knowledge {_fmt(k['distance_m'][0])} vs "
+                f"{'/'.join(_fmt(v) for v in k['distance_m'][1:])} m"),
+        Verdict("Minimising the distance to the next position (costs 3, 4) reduces distance and time further.", ok4,
+                f"{n4}/8 comparisons against cost 2 hold; time cost 2 vs 3/4: no knowledge {_fmt(u['time_min'][1])} vs "
+                f"{_fmt(u['time_min'][2])}/{_fmt(u['time_min'][3])} min, knowledge {_fmt(k['time_min'][1])} vs "
+                f"{_fmt(k['time_min'][2])}/{_fmt(k['time_min'][3])} min"),
+    ]
+
+
+def _best(u: dict, k: dict) -> list[Verdict]:
+    cells = {m: [tab[m][c] for tab in (u, k) for c in range(4)] for m in ("time_min", "distance_m")}
+    known = {m: [v for v in vs if v is not None] for m, vs in cells.items()}
+    ok5 = None if any(None in vs for vs in cells.values()) else all(k[m][2] == min(vs) for m, vs in cells.items())
+    ok6, n6 = _comparisons([(k["actions"][c], k["actions"][1]) for c in (0, 2, 3)])
+    return [
+        Verdict("Knowledge with cost 3 gives the best results (least time and distance of all eight cells).", ok5,
+                f"knowledge + cost 3: {_fmt(k['time_min'][2])} min, {_fmt(k['distance_m'][2])} m; least of all cells: "
+                f"{_fmt(min(known['time_min'], default=None))} min, {_fmt(min(known['distance_m'], default=None))} m"),
+        Verdict("The number of actions is best minimised by costs 1, 3 and 4 (checked with knowledge, where the "
+                "report's Table 3 supports it; in its Table 2 cost 1 needs the most).", ok6,
+                f"{n6}/3 of costs 1/3/4 need fewer actions than cost 2: "
+                f"{'/'.join(_fmt(k['actions'][c]) for c in (0, 2, 3))} vs {_fmt(k['actions'][1])}"),
+    ]
+
+
+# --- methods, latency, wall time -------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class MethodStats:
+    name: str
+    runs: int
+    successes: int
+    spl: float | None
+    time_min: float | None  # over successful runs, like actions and distance
+    actions: float | None
+    distance_m: float | None
+    latency_p50_ms: float | None  # median over runs of each run's p50
+    latency_p95_ms: float | None  # 95th percentile over runs of each run's p95
+
+    @property
+    def success_rate(self) -> float | None:
+        return self.successes / self.runs if self.runs else None
+
+
+def _stats(name: str, rows: list[dict]) -> MethodStats:
+    ok = [r for r in rows if r["success"]]
+    p50 = [r["planning_ms_p50"] for r in rows if r["planning_ms_p50"] is not None]
+    p95 = [r["planning_ms_p95"] for r in rows if r["planning_ms_p95"] is not None]
+    return MethodStats(name, len(rows), len(ok), _mean([r["spl"] or 0.0 for r in rows]),
+                       *(_mean([r[m] for r in ok]) for m in ("time_min", "actions", "distance_m")),
+                       statistics.median(p50) if p50 else None, float(np.percentile(p95, 95)) if p95 else None)
+
+
+def method_stats(rows: list[dict]) -> list[MethodStats]:
+    """SYT over all costs, SYT per cost, then each baseline in the order first seen."""
+    syt = [r for r in rows if r["method"] == "syt"]
+    out = [_stats("syt (all costs)", syt)] if syt else []
+    for cost in COSTS:
+        if any(r["cost"] == cost for r in syt):
+            out.append(_stats(f"syt (cost {cost})", [r for r in syt if r["cost"] == cost]))
+    for name in dict.fromkeys(r["method"] for r in rows if r["method"] != "syt"):
+        out.append(_stats(name, [r for r in rows if r["method"] == name]))
+    return out
+
+
+def _scenario(row: dict) -> tuple:
+    return row["world"], row["start"], row["target"], row["prior"], row["seed"]
+
+
+def paired_times(rows: list[dict], cost: int = 3) -> list[tuple[str, int, float | None, float | None]]:
+    """Per baseline: (name, scenarios both found, SYT's mean robot minutes there, the baseline's)."""
+    syt = {_scenario(r): r["time_min"] for r in rows if r["method"] == "syt" and r["cost"] == cost and r["success"]}
+    out = []
+    for name in dict.fromkeys(r["method"] for r in rows if r["method"] != "syt"):
+        mine = {_scenario(r): r["time_min"] for r in rows if r["method"] == name and r["success"]}
+        common = sorted(set(syt) & set(mine))
+        out.append((name, len(common), _mean([syt[s] for s in common]), _mean([mine[s] for s in common])))
+    return out
+
+
+# --- report.md -------------------------------------------------------------------------------------
+
+def _table_md(prior: str, ours: Tables, rows: list[dict]) -> list[str]:
+    title = "Table 2" if prior == "uniform" else "Table 3"
+    lines = [f"### {PRIORS[prior]} (prior `{prior}`; the report's {title})", "",
+             "| Average per run | " + " | ".join(f"Cost({c})" for c in COSTS) + " |", "|---" * 5 + "|"]
+    for metric, label in METRICS.items():
+        cells = [f"{_fmt(ours[prior][metric][i])} ({REPORT[prior][metric][i]:g})" for i in range(4)]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    counts = []
+    for c in COSTS:
+        cell = [r for r in rows if r["method"] == "syt" and r["prior"] == prior and r["cost"] == c]
+        counts.append(f"{sum(r['success'] for r in cell)}/{len(cell)}")
+    return lines + ["| Successful / all runs | " + " | ".join(counts) + " |", ""]
+
+
+def _methods_md(stats: list[MethodStats]) -> list[str]:
+    lines = ["| Method | Runs | Success | SPL | Robot time to find (min) | Actions | Distance (m) | "
+             "Planning p50 / p95 (ms) |", "|---" * 8 + "|"]
+    for s in stats:
+        rate = "—" if s.success_rate is None else f"{100 * s.success_rate:.1f}%"
+        lines.append(f"| {s.name} | {s.runs} | {rate} | {_fmt(s.spl, 3)} | {_fmt(s.time_min)} | {_fmt(s.actions, 1)} | "
+                     f"{_fmt(s.distance_m)} | {_fmt(s.latency_p50_ms, 0)} / {_fmt(s.latency_p95_ms, 0)} |")
+    return lines + [""]
+
+
+def _paired_md(rows: list[dict]) -> list[str]:
+    pairs = paired_times(rows)
+    if not pairs:
+        return ["No baseline runs (`--baselines`).", ""]
+    lines = ["Mean robot time to find on the scenarios (start × target × prior × seed) that both SYT with cost 3 "
+             "and the baseline solved:", "", "| Baseline | Scenarios | SYT (min) | Baseline (min) | SYT ahead |",
+             "|---" * 5 + "|"]
+    for name, n, mine, theirs in pairs:
+        ahead = "—" if mine is None or theirs is None else ("yes" if mine < theirs else "no")
+        lines.append(f"| {name} | {n} | {_fmt(mine)} | {_fmt(theirs)} | {ahead} |")
+    return lines + [""]
+
+
+def _errors_md(rows: list[dict]) -> list[str]:
+    """Runs that crashed or timed out (counted as failures above), grouped by their message."""
+    errors: dict[str, int] = {}
+    for r in rows:
+        if r["status"].startswith("error"):
+            message = (r["error"] or r["status"]).split(": ", 1)[-1][:160]
+            errors[message] = errors.get(message, 0) + 1
+    if not errors:
+        return ["No run crashed or timed out.", ""]
+    lines = [f"{sum(errors.values())} runs crashed or timed out (counted as failures above; rerunning the same "
+             "command tries them again):", ""]
+    return lines + [f"- {n} × `{message}`" for message, n in sorted(errors.items(), key=lambda e: -e[1])] + [""]
+
+
+def _wall_md(rows: list[dict], sweep: tuple[int, float, int] | None = None) -> list[str]:
+    walls = [r["run_wall_s"] for r in rows if r["run_wall_s"] is not None]
+    if not walls:
+        return []
+    ran = [] if sweep is None else [f"The sweep that wrote this report ran {sweep[0]} runs in **{sweep[1] / 60:.1f} min** "
+                                    f"of wall time with {sweep[2]} jobs.", ""]
+    methods = dict.fromkeys(r["method"] for r in rows)
+    by_method = {m: _mean([r["run_wall_s"] for r in rows if r["method"] == m]) for m in methods}
+    return ["## Wall time", "", *ran, f"{len(walls)} runs took {sum(walls) / 60:.1f} min of worker wall time in all "
+            f"(mean {statistics.fmean(walls):.0f} s, median {statistics.median(walls):.0f} s, max {max(walls):.0f} s "
+            "per run; a worker's first run includes its agent's start-up); with N jobs the sweep's wall time is about "
+            "this sum / N. "
+            "Mean per run: " + ", ".join(f"{m} {_fmt(w, 0)} s" for m, w in by_method.items()) + ".", ""]
+
+
+def render(rows: list[dict], sweep: tuple[int, float, int] | None = None) -> str:
+    """The report; ``sweep``: (runs, wall seconds, jobs) of the sweep that just ran, if one did."""
+    ours = syt_tables(rows)
+    syt = [r for r in rows if r["method"] == "syt"]
+    rate = sum(r["success"] for r in syt) / len(syt) if syt else None
+    lines = ["# Experiment: the SYT search against the report's §5.2", "",
+             f"{len(rows)} runs ({len(syt)} SYT). Success: the target found and the estimate within 0.5 m of its true "
+             "centre. **Actions, time and distance are averaged over successful runs; success rates and SPL over all "
+             "runs.** Time is the robot's (simulated) clock. Each cell: ours (the report's).", "",
+             "## Tables 2 and 3", ""]
+    for prior in PRIORS:
+        lines += _table_md(prior, ours, rows)
+    lines += ["## Success, SPL, planning latency", "",
+              f"SYT success rate: **{'—' if rate is None else f'{100 * rate:.1f}%'}** "
+              f"(report: {100 * REPORT_SUCCESS:.0f}%). "
+              "SPL: success × shortest path / max(driven, shortest path), the shortest path being the collision-free "
+              "path on the true floor map to the closest position that sees the target.", ""]
+    lines += _methods_md(method_stats(rows)) + _errors_md(rows)
+    lines += ["## SYT against the baselines", ""] + _paired_md(rows)
+    lines += ["## The report's six conclusions", ""]
+    for i, v in enumerate(conclusions(ours), 1):
+        verdict = {True: "**agrees**", False: "**does not agree**", None: "**cannot tell** (a cell has no success)"}
+        lines.append(f"{i}. {v.claim} — {verdict[v.agrees]}: {v.evidence}.")
+    lines += [""] + _wall_md(rows, sweep) + ["## Plots", ""] + [f"![{p}]({p})" for p in PLOTS] + [""]
+    return "\n".join(lines)
+
+
+# --- plots -----------------------------------------------------------------------------------------
+
+PLOTS = ("actions.png", "time.png", "distance.png", "success.png")
+_COLOURS = ((180, 119, 31), (14, 127, 255), (232, 199, 174), (120, 187, 255), (44, 160, 44), (40, 39, 214),
+            (189, 103, 148), (75, 86, 140))  # BGR
+
+
+def _nice_top(value: float) -> float:
+    if value <= 0:
+        return 1.0
+    step = 10 ** math.floor(math.log10(value))
+    return next(m * step for m in (1, 2, 2.5, 5, 10) if m * step >= value)
+
+
+def bar_chart(path: Path, title: str, groups: list[str], series: list[tuple[str, list[float | None]]],
+              unit: str, size: tuple[int, int] = (900, 520)) -> None:
+    """Grouped bars: one group per label in ``groups``, one bar per series (missing values left out)."""
+    w, h = size
+    left, right, top, bottom = 70, 20, 60, 90
+    img = np.full((h, w, 3), 255, np.uint8)
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    peak = _nice_top(max((v for _, vs in series for v in vs if v is not None), default=1.0))
+    y_of = lambda v: int(h - bottom - (h - top - bottom) * v / peak)  # noqa: E731 - local scale
+    cv2.putText(img, title, (left, 30), font, 0.65, (0, 0, 0), 1, cv2.LINE_AA)
+    for i in range(6):
+        v = peak * i / 5
+        cv2.line(img, (left, y_of(v)), (w - right, y_of(v)), (225, 225, 225), 1)
+        cv2.putText(img, f"{v:g}", (8, y_of(v) + 4), font, 0.4, (60, 60, 60), 1, cv2.LINE_AA)
+    cv2.putText(img, unit, (8, top - 12), font, 0.4, (60, 60, 60), 1, cv2.LINE_AA)
+    slot = (w - left - right) / max(len(groups), 1)
+    bar = slot * 0.8 / max(len(series), 1)
+    for g, label in enumerate(groups):
+        x0 = left + g * slot + slot * 0.1
+        cv2.putText(img, label, (int(x0), h - bottom + 18), font, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+        for s, (_, values) in enumerate(series):
+            if values[g] is None:
+                continue
+            xa, xb = int(x0 + s * bar), int(x0 + (s + 1) * bar) - 2
+            cv2.rectangle(img, (xa, y_of(values[g])), (xb, y_of(0)), _COLOURS[s % len(_COLOURS)], -1)
+            cv2.putText(img, f"{values[g]:.3g}", (xa, y_of(values[g]) - 4), font, 0.33, (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.line(img, (left, y_of(0)), (w - right, y_of(0)), (0, 0, 0), 1)
+    for s, (name, _) in enumerate(series):
+        x, y = left + (s % 4) * 200, h - bottom + 42 + (s // 4) * 20
+        cv2.rectangle(img, (x, y - 10), (x + 14, y + 2), _COLOURS[s % len(_COLOURS)], -1)
+        cv2.putText(img, name, (x + 20, y), font, 0.42, (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.imwrite(str(path), img)
+
+
+def write_plots(rows: list[dict], out: Path) -> list[Path]:
+    ours = syt_tables(rows)
+    groups = [f"Cost({c})" for c in COSTS]
+    paths = []
+    for name, metric, unit in (("actions.png", "actions", "looks"), ("time.png", "time_min", "minutes"),
+                               ("distance.png", "distance_m", "metres")):
+        series = [(f"ours, {PRIORS[p].lower()}", ours[p][metric]) for p in PRIORS]
+        series += [(f"report, {PRIORS[p].lower()}", list(REPORT[p][metric])) for p in PRIORS]
+        bar_chart(out / name, f"{METRICS[metric]}: mean over successful SYT runs", groups, series, unit)
+        paths.append(out / name)
+    stats = method_stats(rows)
+    bar_chart(out / "success.png", "Success rate per method (report: 91%)", [s.name for s in stats],
+              [("success rate, %", [None if s.success_rate is None else 100 * s.success_rate for s in stats])], "%",
+              size=(max(900, 110 * len(stats)), 520))
+    return paths + [out / "success.png"]
+
+
+def write_report(results: Path, out: Path, sweep: tuple[int, float, int] | None = None) -> list[Path]:
+    """report.md and the plots beside it; returns what was written."""
+    rows = load_results(results)
+    out.mkdir(parents=True, exist_ok=True)
+    report = out / "report.md"
+    report.write_text(render(rows, sweep))
+    return [report, *write_plots(rows, out)]

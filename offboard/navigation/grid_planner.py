@@ -1,0 +1,240 @@
+"""Global path planning for the base on the inflated floor map: Dijkstra, A* and line-of-sight smoothing.
+
+The configuration space is the :class:`~offboard.perception.occupancy.FloorMap`'s ``blocked`` array (occupied
+columns inflated by the robot's radius, walls included); a cell centre is where the robot's centre
+may stand. Cell (i, j) spans [i·res, (i+1)·res) × [j·res, (j+1)·res): the map starts at the world
+origin, the room's corner. Unknown cells are *free* (the free-space assumption of planning in partly
+known terrain: optimistic paths, re-planned when stereo shows otherwise).
+
+- :func:`distance_field`: Dijkstra on the 8-connected grid (diagonals cost √2 and may not cut a
+  blocked corner) from one start to every cell, in metres; the search planner reads the path length
+  to its candidate viewpoints from it.
+- :func:`shortest_path`: A* (octile heuristic, admissible and consistent on this grid) to one goal,
+  then greedy line-of-sight shortcutting ("string pulling"), which removes the grid's zig-zags.
+
+The kernels are numba: a priority-queue search is sequential by nature.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+
+import numba
+import numpy as np
+
+from offboard.perception.occupancy import FloorMap
+
+Point = tuple[float, float]
+
+_SQRT2 = math.sqrt(2.0)
+# the 8 neighbours: (di, dj, step length in cells)
+_NEIGHBOURS = np.array([(1, 0, 1.0), (-1, 0, 1.0), (0, 1, 1.0), (0, -1, 1.0),
+                        (1, 1, _SQRT2), (1, -1, _SQRT2), (-1, 1, _SQRT2), (-1, -1, _SQRT2)])
+
+
+# --- cells and points ------------------------------------------------------------------------------
+
+def cell_of(floor_map: FloorMap, xy: Point) -> tuple[int, int]:
+    """Index of the cell holding a world point, clamped into the map (the map starts at the origin)."""
+    nx, ny = floor_map.blocked.shape
+    res = floor_map.resolution_m
+    return (min(max(int(math.floor(xy[0] / res)), 0), nx - 1),
+            min(max(int(math.floor(xy[1] / res)), 0), ny - 1))
+
+
+def cell_center(floor_map: FloorMap, cell: tuple[int, int]) -> Point:
+    res = floor_map.resolution_m
+    return ((cell[0] + 0.5) * res, (cell[1] + 0.5) * res)
+
+
+def is_free(floor_map: FloorMap, xy: Point) -> bool:
+    """Can the robot's centre stand at ``xy``? (Outside the room it cannot.)"""
+    nx, ny = floor_map.blocked.shape
+    i, j = (math.floor(v / floor_map.resolution_m) for v in xy)
+    return 0 <= i < nx and 0 <= j < ny and not floor_map.blocked[i, j]
+
+
+def nearest_free_cell(floor_map: FloorMap, xy: Point) -> tuple[int, int] | None:
+    """The free cell whose centre is closest to ``xy`` (the robot hugging an obstacle starts there)."""
+    cell = cell_of(floor_map, xy)
+    if not floor_map.blocked[cell]:
+        return cell
+    free = np.argwhere(~floor_map.blocked)
+    if free.shape[0] == 0:
+        return None
+    centres = (free + 0.5) * floor_map.resolution_m
+    best = int(np.argmin(np.hypot(centres[:, 0] - xy[0], centres[:, 1] - xy[1])))
+    return int(free[best, 0]), int(free[best, 1])
+
+
+def segment_is_free(floor_map: FloorMap, a: Point, b: Point) -> bool:
+    """Does the straight segment a→b cross only free cells (every cell it touches)?"""
+    res = floor_map.resolution_m
+    return bool(_segment_free(floor_map.blocked, a[0] / res, a[1] / res, b[0] / res, b[1] / res))
+
+
+def path_length_m(path: list[Point] | None) -> float:
+    """Length of a polyline in metres (``inf`` for no path)."""
+    if path is None:
+        return math.inf
+    return float(sum(math.dist(p, q) for p, q in zip(path[:-1], path[1:])))
+
+
+# --- planning --------------------------------------------------------------------------------------
+
+def distance_field(floor_map: FloorMap, start_xy: Point) -> np.ndarray:
+    """Shortest 8-connected path length (m) from ``start_xy`` to every cell; ``inf`` if unreachable.
+
+    If the start's cell is blocked (the robot hugs an obstacle) the search starts from the nearest
+    free cell, at the straight-line cost of getting there.
+    """
+    blocked = np.ascontiguousarray(floor_map.blocked)
+    start = nearest_free_cell(floor_map, start_xy)
+    dist = np.full(blocked.shape, np.inf)
+    if start is None:
+        return dist
+    offset = math.dist(start_xy, cell_center(floor_map, start)) / floor_map.resolution_m
+    _dijkstra(blocked, start[0], start[1], offset, -1, -1, dist, np.full(blocked.shape, -1, np.int64))
+    return dist * floor_map.resolution_m
+
+
+def distances_at(floor_map: FloorMap, field: np.ndarray, points_xy: np.ndarray) -> np.ndarray:
+    """Look up a :func:`distance_field` at world points (N, 2); ``inf`` outside the room."""
+    pts = np.atleast_2d(np.asarray(points_xy, dtype=np.float64))
+    idx = np.floor(pts / floor_map.resolution_m).astype(np.int64)
+    inside = np.all((idx >= 0) & (idx < np.array(field.shape)), axis=1)
+    out = np.full(pts.shape[0], np.inf)
+    out[inside] = field[idx[inside, 0], idx[inside, 1]]
+    return out
+
+
+def shortest_path(floor_map: FloorMap, start_xy: Point, goal_xy: Point) -> list[Point] | None:
+    """Shortest collision-free polyline from start to goal (both included), or ``None``.
+
+    ``None`` when the goal's cell is blocked, lies outside the room, or no free route connects them.
+    """
+    if not is_free(floor_map, goal_xy):
+        return None
+    start = nearest_free_cell(floor_map, start_xy)
+    if start is None:
+        return None
+    goal = cell_of(floor_map, goal_xy)
+    blocked = np.ascontiguousarray(floor_map.blocked)
+    parent = np.full(blocked.shape, -1, np.int64)
+    dist = np.full(blocked.shape, np.inf)
+    if not _dijkstra(blocked, start[0], start[1], 0.0, goal[0], goal[1], dist, parent):
+        return None
+    cells = _backtrack(parent, goal, blocked.shape[1])
+    points = [cell_center(floor_map, c) for c in cells]
+    if points[0] != start_xy:
+        points.insert(0, start_xy)  # from the robot itself; if it stood blocked, this hop leaves the obstacle
+    points[-1] = goal_xy
+    return _shortcut(floor_map, points)
+
+
+def _backtrack(parent: np.ndarray, goal: tuple[int, int], ny: int) -> list[tuple[int, int]]:
+    cells = [goal]
+    flat = parent[goal]
+    while flat >= 0:
+        cells.append((int(flat // ny), int(flat % ny)))
+        flat = parent[cells[-1]]
+    cells.reverse()
+    return cells
+
+
+def _shortcut(floor_map: FloorMap, points: list[Point]) -> list[Point]:
+    """Greedy string pulling: from each kept vertex jump to the farthest vertex still in line of sight.
+
+    The first hop is kept as it is when the start is blocked (leaving an obstacle cannot be free)."""
+    out = [points[0]]
+    i = 0
+    if not is_free(floor_map, points[0]) and len(points) > 1:
+        out.append(points[1])
+        i = 1
+    while i < len(points) - 1:
+        j = len(points) - 1
+        while j > i + 1 and not segment_is_free(floor_map, points[i], points[j]):
+            j -= 1
+        out.append(points[j])
+        i = j
+    return out
+
+
+# --- kernels ---------------------------------------------------------------------------------------
+
+@numba.njit(cache=True)
+def _dijkstra(blocked, si, sj, start_cost, gi, gj, dist, parent):
+    """Dijkstra from (si, sj), or A* with the octile heuristic when a goal (gi >= 0) is given.
+
+    Fills ``dist`` (cells) and ``parent`` (flat index); returns whether the goal was reached."""
+    nx, ny = blocked.shape
+    use_goal = gi >= 0
+    dist[si, sj] = start_cost
+    heap = [(start_cost + _octile(si, sj, gi, gj, use_goal), si * ny + sj)]
+    done = np.zeros(blocked.shape, np.bool_)
+    while heap:
+        _, flat = heapq.heappop(heap)
+        i, j = flat // ny, flat % ny
+        if done[i, j]:
+            continue
+        done[i, j] = True
+        if use_goal and i == gi and j == gj:
+            return True
+        for k in range(8):
+            di, dj, step = int(_NEIGHBOURS[k, 0]), int(_NEIGHBOURS[k, 1]), _NEIGHBOURS[k, 2]
+            a, b = i + di, j + dj
+            if a < 0 or a >= nx or b < 0 or b >= ny or blocked[a, b] or done[a, b]:
+                continue
+            if di != 0 and dj != 0 and (blocked[i + di, j] or blocked[i, j + dj]):
+                continue  # a diagonal may not cut the corner of a blocked cell
+            cost = dist[i, j] + step
+            if cost < dist[a, b]:
+                dist[a, b] = cost
+                parent[a, b] = flat
+                heapq.heappush(heap, (cost + _octile(a, b, gi, gj, use_goal), a * ny + b))
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def _octile(i, j, gi, gj, use_goal):
+    if not use_goal:
+        return 0.0
+    dx, dy = abs(i - gi), abs(j - gj)
+    return max(dx, dy) + (_SQRT2 - 1.0) * min(dx, dy)
+
+
+@numba.njit(cache=True)
+def _segment_free(blocked, x0, y0, x1, y1):
+    """Amanatides-Woo walk over every cell the segment touches (cell units); False at a blocked one.
+
+    Where the segment passes exactly through a cell corner both side cells are checked."""
+    nx, ny = blocked.shape
+    i, j = int(math.floor(x0)), int(math.floor(y0))
+    i1, j1 = int(math.floor(x1)), int(math.floor(y1))
+    dx, dy = x1 - x0, y1 - y0
+    si = 1 if dx > 0 else -1
+    sj = 1 if dy > 0 else -1
+    ti = ((i + 1 - x0) / dx if dx > 0 else (x0 - i) / -dx) if dx != 0 else np.inf
+    tj = ((j + 1 - y0) / dy if dy > 0 else (y0 - j) / -dy) if dy != 0 else np.inf
+    di = abs(1.0 / dx) if dx != 0 else np.inf
+    dj = abs(1.0 / dy) if dy != 0 else np.inf
+    for _ in range(abs(i1 - i) + abs(j1 - j) + 2):
+        if i < 0 or i >= nx or j < 0 or j >= ny or blocked[i, j]:
+            return False
+        if (i == i1 and j == j1) or min(ti, tj) >= 1.0:  # in the last cell (or on its boundary)
+            return 0 <= i1 < nx and 0 <= j1 < ny and not blocked[i1, j1]
+        if abs(ti - tj) < 1e-9:  # through a corner: the two side cells count as touched
+            if (0 <= i + si < nx and blocked[i + si, j]) or (0 <= j + sj < ny and blocked[i, j + sj]):
+                return False
+            i += si
+            j += sj
+            ti += di
+            tj += dj
+        elif ti < tj:
+            i += si
+            ti += di
+        else:
+            j += sj
+            tj += dj
+    return False  # not reached: float round-off on a degenerate segment; be safe

@@ -1,0 +1,195 @@
+"""``syt-offboard calibrate-detector``: measure a detector's detectability table on simulated views.
+
+The real detector runs on real rendered stereo captures, taken by a simulated robot that the
+calibration teleports around a target it has placed itself (the simulator's ``sim/teleport``):
+for every cell of distance × angle off the optical axis × angle between the viewing ray and the
+face's normal, the robot stands where the target is seen that way and the detector either finds
+the target where it is, finds something elsewhere (a false positive), or nothing. Views that look
+away from the target — at posters of other pictures — measure the false-positive rate.
+
+The calibration room is written by the calibration itself (a world file in the simulator's format):
+a large room with textured walls, distractor posters and the target on a stand at camera height.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from offboard.perception.detectability import DetectabilityTable
+from offboard.perception.detection.detector import Detector
+from offboard.robot.robot_client import CommandError, RobotClient
+from shared.geometry import HeadMount, Intrinsics, Pose2D, wrap_angle
+
+log = logging.getLogger(__name__)
+
+ROOM_M = (7.5, 11.0, 2.6)
+TARGET_XY = (0.6, 5.5)  # on a stand by the west wall, its picture facing +x (into the room)
+
+
+@dataclass(frozen=True)
+class CalibrationGrid:
+    distance_edges_m: tuple[float, ...] = tuple(np.round(np.arange(0.25, 6.01, 0.25), 3))
+    off_axis_edges_deg: tuple[float, ...] = (0.0, 7.0, 14.0, 21.0, 28.0, 35.0)
+    facing_edges_deg: tuple[float, ...] = tuple(float(v) for v in range(0, 91, 10))
+    samples: int = 1  # views per cell (each with the opposite sign of the angles from the last)
+    negatives: int = 200  # views without the target
+
+
+@dataclass
+class Tally:
+    hits: np.ndarray
+    views: np.ndarray
+    false_positives: int = 0
+    negative_views: int = 0
+    detect_ms: list[float] = field(default_factory=list)
+
+
+def calibration_world(target_picture: str, target_size_m: tuple[float, float, float], head_height_m: float) -> str:
+    """The calibration room in the simulator's world format; the target's centre at camera height."""
+    bottom = head_height_m - target_size_m[2] / 2
+    x, y = TARGET_XY
+    posters = [("astronaut", 7.48, 2.5, 1.3, 180), ("coffee", 7.48, 8.5, 1.3, 180), ("rocket", 3.5, 10.98, 1.4, -90),
+               ("hubble", 3.5, 0.02, 1.4, 90)]  # not chelsea: the target's picture is cut from it
+    text = [f'name = "calibration"', "[room]", f"size = {list(ROOM_M)}", 'texture = "brick"', "",
+            "[[obstacle]]", 'name = "stand"', 'kind = "stand"', f"min = [{x - 0.15}, {y - 0.15}, 0.0]",
+            f"max = [{x + 0.15}, {y + 0.15}, {bottom:.3f}]", 'texture = "wood"', ""]
+    for name, px, py, pz, yaw in posters:
+        text += ["[[poster]]", f'name = "{name}"', f'picture = "{name}"', f"center = [{px}, {py}, {pz}]",
+                 "size = [0.5, 0.4]", f"yaw_deg = {yaw}", ""]
+    text += ["[target]", f'picture = "{target_picture}"', f"size = {list(target_size_m)}",
+             f"position = [{x}, {y}, {bottom:.3f}]", "yaw_deg = 0", "", "[robot]", "start = [4.0, 5.5]",
+             "heading_deg = 180"]
+    return "\n".join(text) + "\n"
+
+
+def viewpoint(distance_m: float, off_axis_deg: float, facing_deg: float, face_center: np.ndarray) -> Pose2D:
+    """Where the robot stands (head level with the face) to see its centre at ``distance_m``,
+    ``facing_deg`` from its normal (+x) and ``off_axis_deg`` off the optical axis (pan 0)."""
+    azimuth = math.radians(facing_deg)
+    x = face_center[0] + distance_m * math.cos(azimuth)
+    y = face_center[1] + distance_m * math.sin(azimuth)
+    toward = math.atan2(face_center[1] - y, face_center[0] - x)
+    return Pose2D(x, y, wrap_angle(toward - math.radians(off_axis_deg)))
+
+
+def is_true_hit(detection, face_center: np.ndarray, camera_pose: Pose2D, intrinsics: Intrinsics,
+                mount: HeadMount, face_width_m: float) -> bool:
+    """The detection is on the target: its centre within a quarter of the face's size of the truth."""
+    camera = mount.camera_in_world(camera_pose, 0.0, 0.0)
+    truth = intrinsics.project(camera.inverse().apply(face_center[None]))[0]
+    depth = np.linalg.norm(face_center - camera.translation)
+    tolerance_px = max(12.0, 0.25 * intrinsics.fx_px * face_width_m / depth)
+    return bool(np.all(np.isfinite(truth)) and np.linalg.norm(detection.center_px - truth) <= tolerance_px)
+
+
+def calibrate(robot: RobotClient, detector: Detector, grid: CalibrationGrid, face_center: np.ndarray,
+              face_width_m: float, progress: Callable[[int, int], None] = lambda done, total: None) -> Tally:
+    info = robot.info()
+    intrinsics, mount = info.intrinsics.to_intrinsics(), info.mount.to_mount()
+    cells = _cells(grid)
+    shape = (len(grid.distance_edges_m) - 1, len(grid.off_axis_edges_deg) - 1, len(grid.facing_edges_deg) - 1)
+    tally = Tally(np.zeros(shape, int), np.zeros(shape, int))
+    robot.look(0.0, 0.0)
+    total = len(cells) * grid.samples + grid.negatives
+    done = 0
+    for index, (d, o, f) in cells:
+        for sample in range(grid.samples):
+            sign = 1 if sample % 2 == 0 else -1
+            pose = viewpoint(d, sign * o, sign * f, face_center)
+            left = _capture_at(robot, pose)
+            done += 1
+            progress(done, total)
+            if left is None:
+                continue
+            found = _timed_detect(detector, left, tally)
+            tally.views[index] += 1
+            if found is not None and is_true_hit(found, face_center, pose, intrinsics, mount, face_width_m):
+                tally.hits[index] += 1
+            elif found is not None:
+                tally.false_positives += 1
+    rng = np.random.default_rng(0)
+    while tally.negative_views < grid.negatives:
+        pose = _looking_away(rng, face_center, intrinsics)
+        left = _capture_at(robot, pose)
+        done += 1
+        progress(done, total)
+        if left is None:
+            continue
+        tally.negative_views += 1
+        tally.false_positives += _timed_detect(detector, left, tally) is not None
+    return tally
+
+
+def to_table(name: str, grid: CalibrationGrid, tally: Tally) -> DetectabilityTable:
+    rate = pooled_rate(tally.hits, tally.views)
+    views = tally.negative_views + int(tally.views.sum())
+    return DetectabilityTable(name, np.array(grid.distance_edges_m), np.array(grid.off_axis_edges_deg),
+                              np.array(grid.facing_edges_deg), rate, tally.views,
+                              tally.false_positives / max(views, 1), float(np.median(tally.detect_ms or [0.0])))
+
+
+def pooled_rate(hits: np.ndarray, views: np.ndarray) -> np.ndarray:
+    """Detection rate per cell from its views and its neighbours' (the 3 × 3 × 3 cells around it:
+    detection varies smoothly, and one view a cell says little), counting one miss more than seen:
+    hits / (views + 1). So no cell claims certainty (which would let one look rule a place out for
+    good) and thinly measured cells lean towards "not detected" (the planner then looks again
+    rather than trusting a look that may not work). Cells with no view around them get 0."""
+    return _box_sum(hits.astype(float)) / (_box_sum(views.astype(float)) + 1.0)
+
+
+def _box_sum(values: np.ndarray) -> np.ndarray:
+    padded = np.pad(values, 1)
+    n0, n1, n2 = values.shape
+    return sum(padded[i:i + n0, j:j + n1, k:k + n2] for i in range(3) for j in range(3) for k in range(3))
+
+
+def _cells(grid: CalibrationGrid) -> list[tuple[tuple[int, int, int], tuple[float, float, float]]]:
+    centre = lambda edges, i: (edges[i] + edges[i + 1]) / 2  # noqa: E731 - one line is clearer here
+    return [((i, j, k), (centre(grid.distance_edges_m, i), centre(grid.off_axis_edges_deg, j),
+                         centre(grid.facing_edges_deg, k)))
+            for i in range(len(grid.distance_edges_m) - 1) for j in range(len(grid.off_axis_edges_deg) - 1)
+            for k in range(len(grid.facing_edges_deg) - 1)]
+
+
+def _capture_at(robot: RobotClient, pose: Pose2D) -> np.ndarray | None:
+    try:
+        robot.sim_teleport(pose.x_m, pose.y_m, math.degrees(pose.heading_rad))
+    except CommandError:  # a wall or the stand is in the way: that view cannot be had
+        return None
+    return robot.capture().left
+
+
+def _timed_detect(detector: Detector, image: np.ndarray, tally: Tally):
+    started = time.perf_counter()
+    found = detector.detect(image)
+    tally.detect_ms.append((time.perf_counter() - started) * 1000.0)
+    return found
+
+
+def _looking_away(rng: np.random.Generator, face_center: np.ndarray, intrinsics: Intrinsics) -> Pose2D:
+    """A random pose whose view cannot contain the target (pointing well away from it)."""
+    while True:
+        x, y = rng.uniform(0.5, ROOM_M[0] - 0.5), rng.uniform(0.5, ROOM_M[1] - 0.5)
+        heading = rng.uniform(-math.pi, math.pi)
+        toward = math.atan2(face_center[1] - y, face_center[0] - x)
+        if abs(wrap_angle(heading - toward)) > intrinsics.hfov_rad / 2 + math.radians(25):
+            return Pose2D(x, y, heading)
+
+
+def summary(table: DetectabilityTable, tally: Tally) -> dict:
+    """The figures the perception issue asks for, from the measured cells."""
+    d = (np.array(table.distance_edges_m[:-1]) >= 0.5) & (np.array(table.distance_edges_m[1:]) <= 2.5)
+    f = np.array(table.facing_edges_deg[1:]) <= 45.0
+    views = tally.views[d][:, :, f].sum()
+    hits = tally.hits[d][:, :, f].sum()
+    return {"detector": table.detector, "views": int(tally.views.sum()), "negative_views": tally.negative_views,
+            "false_detections": tally.false_positives, "false_positive_rate": round(table.false_positive_rate, 5),
+            "detection_rate_0_5_to_2_5m_under_45deg": round(float(hits / max(views, 1)), 4),
+            "views_0_5_to_2_5m_under_45deg": int(views), "range_m": list(table.range_m),
+            "cost_ms": round(table.cost_ms, 2)}

@@ -1,0 +1,321 @@
+"""How solid each cube is: a 3D log-odds occupancy grid built from stereo (report §4.1, eq. 5-8).
+
+Per frame, for every stereo point (u, v, d):
+
+- its uncertainty region U is the box spanned by ``u ± 0.5, v ± 0.5, d ± 0.5`` (eq. 6), and the set
+  C of cubes overlapping U each receive ``hit_scale / |C|`` of evidence (eq. 7): a far point, whose
+  region is large, says less about each cube than a near one;
+- every cube between the camera and U gains ``s = miss_log_odds`` (eq. 8);
+- each cube is updated once per frame: the evidence of all the points that touched it, capped at
+  ``max_hit_per_frame``, else one miss. Occupied wins over free. (Summing, not taking the largest,
+  lets the many pixels that see one far cube together say what one near pixel says alone.)
+
+With the prior p(m_i) = 0.5 the prior term of eq. 5 is zero, so the update is a plain sum, clamped
+as OctoMap does so that a changed world can be re-learnt. Parameters are named like OctoMap's.
+The kernels are numba: a ray walk per point is not something numpy can vectorise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numba
+import numpy as np
+
+from offboard.perception.voxel_grid import VoxelGrid
+from shared.geometry import Intrinsics, RigidTransform
+from shared.strict import bounds
+
+UNKNOWN, FREE, OCCUPIED = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class OccupancyConfig:
+    resolution_m: float = field(default=0.05, metadata=bounds(0.01, 1.0))  # cube edge (report: 5 cm)
+    hit_scale: float = field(default=1.0, metadata=bounds(0.01, 10.0))  # eq. 7: log-odds 1/|C| per point
+    max_hit_per_frame: float = field(default=1.0, metadata=bounds(0.01, 10.0))  # one frame's say on a cube
+    miss_log_odds: float = field(default=-0.4, metadata=bounds(-5.0, -0.01))  # eq. 8: s
+    clamp_min: float = field(default=-2.0, metadata=bounds(-20.0, 0.0))  # OctoMap's 0.12
+    clamp_max: float = field(default=3.5, metadata=bounds(0.0, 20.0))  # OctoMap's 0.97
+    occupied_log_odds: float = field(default=0.5, metadata=bounds(0.0, 20.0))  # at or above: occupied
+    free_log_odds: float = field(default=-0.3, metadata=bounds(-20.0, 0.0))  # at or below: free
+    max_range_m: float = field(default=6.0, metadata=bounds(0.5, 50.0))  # stereo beyond this is ignored
+    point_stride_px: int = field(default=4, metadata=bounds(1, 32))  # subsample the disparity image
+
+
+@dataclass(frozen=True)
+class RayHits:
+    distance_m: np.ndarray  # (N,) to the first occupied cube, the room's boundary, or max range
+    hit: np.ndarray  # (N,) bool: stopped by an occupied cube or the boundary, not by max range
+    crossed_unknown: np.ndarray  # (N,) bool: passed through unknown space before stopping
+
+
+@dataclass(frozen=True)
+class FloorMap:
+    """A 2D map for the base: obstacles between floor clearance and robot height."""
+
+    resolution_m: float
+    occupied: np.ndarray  # (nx, ny) bool: some occupied cube in the robot's height band
+    blocked: np.ndarray  # (nx, ny) bool: occupied inflated by the robot radius, plus the walls
+    unknown: np.ndarray  # (nx, ny) bool: no cube of the band observed
+
+
+class OccupancyGrid:
+    def __init__(self, grid: VoxelGrid, config: OccupancyConfig = OccupancyConfig()):
+        self.grid = grid
+        self.config = config
+        self.log_odds = np.zeros(grid.shape, np.float32)
+        self.observed = np.zeros(grid.shape, np.bool_)
+        n = grid.num_cubes
+        self._hit_value = np.zeros(n, np.float32)
+        self._hit_stamp = np.zeros(n, np.int32)
+        self._touch_stamp = np.zeros(n, np.int32)
+        self._touched = np.zeros(n, np.int64)
+        self._frame = 0
+
+    # --- update ------------------------------------------------------------------------------------
+
+    def integrate(self, u_px: np.ndarray, v_px: np.ndarray, d_px: np.ndarray, intrinsics: Intrinsics,
+                  baseline_m: float, camera_in_world: RigidTransform) -> int:
+        """Fold one frame's stereo points into the grid (eq. 6-8); return the number of cubes updated."""
+        k, c = intrinsics, self.config
+        u, v, d = (np.ascontiguousarray(a, np.float64) for a in (u_px, v_px, d_px))
+        keep = (d > 0) & (k.fx_px * baseline_m / np.maximum(d, 1e-6) <= c.max_range_m)
+        camera = np.array([k.fx_px, k.fy_px, k.cx_px, k.cy_px, baseline_m])
+        # the frame's pose in cube units: p_cube = (R p_cam + t - origin) / resolution
+        rotation = camera_in_world.rotation / self.grid.resolution_m
+        translation = (camera_in_world.translation - self.grid.origin) / self.grid.resolution_m
+        self._frame += 1
+        return int(_integrate_frame(
+            self.log_odds.reshape(-1), self.observed.reshape(-1), self._hit_value, self._hit_stamp,
+            self._touch_stamp, self._touched, self._frame, u[keep], v[keep], d[keep], camera,
+            np.ascontiguousarray(rotation), translation, np.array(self.grid.shape, np.int64),
+            c.hit_scale, c.max_hit_per_frame, c.miss_log_odds, c.clamp_min, c.clamp_max))
+
+    def integrate_disparity(self, disparity: np.ndarray, intrinsics: Intrinsics, baseline_m: float,
+                            camera_in_world: RigidTransform) -> int:
+        """Integrate every ``point_stride_px``-th valid pixel of a disparity image (NaN = invalid)."""
+        s = self.config.point_stride_px
+        sub = disparity[s // 2::s, s // 2::s]
+        v, u = np.nonzero(np.isfinite(sub) & (sub > 0))
+        return self.integrate(u * s + s // 2, v * s + s // 2, sub[v, u], intrinsics, baseline_m, camera_in_world)
+
+    # --- queries -----------------------------------------------------------------------------------
+
+    def state(self) -> np.ndarray:
+        """Three-valued occupancy per cube: UNKNOWN, FREE or OCCUPIED (uint8)."""
+        out = np.full(self.grid.shape, UNKNOWN, np.uint8)
+        out[self.observed & (self.log_odds <= self.config.free_log_odds)] = FREE
+        out[self.observed & (self.log_odds >= self.config.occupied_log_odds)] = OCCUPIED
+        return out
+
+    def occupied(self) -> np.ndarray:
+        return self.log_odds >= self.config.occupied_log_odds
+
+    def cast_rays(self, origins_m: np.ndarray, directions: np.ndarray, max_range_m: float,
+                  stop_at_unknown: bool = False) -> RayHits:
+        """Walk each ray to the first occupied cube (or the room's boundary, or ``max_range_m``);
+        with ``stop_at_unknown``, unknown space blocks the ray too (a pessimistic sensed sphere)."""
+        origins = np.ascontiguousarray((np.atleast_2d(origins_m) - self.grid.origin) / self.grid.resolution_m)
+        dirs = np.atleast_2d(directions).astype(np.float64)
+        dirs = np.ascontiguousarray(dirs / np.linalg.norm(dirs, axis=1, keepdims=True))
+        if origins.shape[0] == 1 and dirs.shape[0] > 1:
+            origins = np.ascontiguousarray(np.broadcast_to(origins, dirs.shape))
+        c = self.config
+        dist, hit, unknown = _cast_rays(self.log_odds, self.observed, origins, dirs,
+                                        max_range_m / self.grid.resolution_m, c.occupied_log_odds,
+                                        c.free_log_odds, stop_at_unknown)
+        return RayHits(dist * self.grid.resolution_m, hit, unknown)
+
+    def coarsened(self, factor: int) -> OccupancyGrid:
+        """The same map in cubes ``factor`` times larger: a block is as occupied as its most occupied
+        observed cube and observed if any cube is. Ray casts on it take ``factor`` times fewer steps."""
+        if factor <= 1:
+            return self
+        shape = tuple(-(-n // factor) for n in self.grid.shape)
+        coarse = OccupancyGrid(VoxelGrid(tuple(n * factor * self.grid.resolution_m for n in shape),
+                                         self.grid.resolution_m * factor, self.grid.origin_m), self.config)
+        _max_pool(self.log_odds, self.observed, factor, coarse.log_odds, coarse.observed)
+        return coarse
+
+    def floor_map(self, robot_radius_m: float, robot_height_m: float, floor_clearance_m: float = 0.1) -> FloorMap:
+        """Columns blocked for the base: anything occupied from ``floor_clearance_m`` (stereo noise on
+        the floor is not an obstacle) up to the robot's height, inflated by its radius."""
+        res = self.grid.resolution_m
+        k0 = max(int(math.floor(floor_clearance_m / res)), 0)
+        k1 = min(int(math.ceil(robot_height_m / res)), self.grid.shape[2])
+        band = slice(k0, k1)
+        occupied = self.occupied()[:, :, band].any(axis=2)
+        unknown = ~self.observed[:, :, band].any(axis=2)
+        radius_cells = int(math.ceil(robot_radius_m / res))
+        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_cells + 1, 2 * radius_cells + 1))
+        padded = np.pad(occupied, radius_cells, constant_values=True)  # the walls bound the room
+        blocked = cv2.dilate(padded.astype(np.uint8), disc)[radius_cells:-radius_cells, radius_cells:-radius_cells]
+        return FloorMap(res, occupied, blocked.astype(bool), unknown)
+
+
+# --- kernels ---------------------------------------------------------------------------------------
+
+@numba.njit(cache=True)
+def _max_pool(log_odds, observed, factor, out_log_odds, out_observed):
+    nx, ny, nz = log_odds.shape
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                if observed[i, j, k]:
+                    a, b, c = i // factor, j // factor, k // factor
+                    if not out_observed[a, b, c] or log_odds[i, j, k] > out_log_odds[a, b, c]:
+                        out_log_odds[a, b, c] = log_odds[i, j, k]
+                    out_observed[a, b, c] = True
+
+@numba.njit(cache=True)
+def _flat(i, j, k, shape):
+    return (i * shape[1] + j) * shape[2] + k
+
+
+@numba.njit(cache=True)
+def _touch(c, frame, touch_stamp, touched, n_touched):
+    if touch_stamp[c] != frame:
+        touch_stamp[c] = frame
+        touched[n_touched] = c
+        return n_touched + 1
+    return n_touched
+
+
+@numba.njit(cache=True, inline="always")
+def _to_cubes(u, v, d, camera, rotation, translation):
+    """Pixel (u, v) at disparity d to a point in cube units (z = f·B/d, eq. 6); scalars, no allocation."""
+    z = camera[0] * camera[4] / d
+    x = (u - camera[2]) * z / camera[0]
+    y = (v - camera[3]) * z / camera[1]
+    return (rotation[0, 0] * x + rotation[0, 1] * y + rotation[0, 2] * z + translation[0],
+            rotation[1, 0] * x + rotation[1, 1] * y + rotation[1, 2] * z + translation[1],
+            rotation[2, 0] * x + rotation[2, 1] * y + rotation[2, 2] * z + translation[2])
+
+
+@numba.njit(cache=True)
+def _integrate_frame(log_odds, observed, hit_value, hit_stamp, touch_stamp, touched, frame, u, v, d,
+                     camera, rotation, translation, shape, hit_scale, max_hit, miss, clamp_min, clamp_max):
+    n_touched = 0
+    lo = np.empty(3, np.int64)
+    hi = np.empty(3, np.int64)
+    for p in range(u.shape[0]):  # eq. 6-7: evidence 1/|C| for each cube C of the region
+        lo[:] = 1 << 40
+        hi[:] = -(1 << 40)
+        for su in (-0.5, 0.5):
+            for sv in (-0.5, 0.5):
+                for sd in (-0.5, 0.5):
+                    q = _to_cubes(u[p] + su, v[p] + sv, max(d[p] + sd, 0.25), camera, rotation, translation)
+                    for a in range(3):
+                        cell = int(math.floor(q[a]))
+                        lo[a] = min(lo[a], cell)
+                        hi[a] = max(hi[a], cell)
+        hit = hit_scale / ((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1))
+        for i in range(max(lo[0], 0), min(hi[0] + 1, shape[0])):
+            for j in range(max(lo[1], 0), min(hi[1] + 1, shape[1])):
+                for k in range(max(lo[2], 0), min(hi[2] + 1, shape[2])):
+                    c = _flat(i, j, k, shape)
+                    if hit_stamp[c] != frame:
+                        hit_stamp[c] = frame
+                        hit_value[c] = min(hit, max_hit)
+                        n_touched = _touch(c, frame, touch_stamp, touched, n_touched)
+                    else:
+                        hit_value[c] = min(hit_value[c] + hit, max_hit)
+    for p in range(u.shape[0]):  # eq. 8: free from the camera to where the region begins
+        near = _to_cubes(u[p], v[p], d[p] + 0.5, camera, rotation, translation)
+        n_touched = _walk_free(translation[0], translation[1], translation[2], near[0], near[1], near[2],
+                               shape, frame, hit_stamp, touch_stamp, touched, n_touched)
+    for t in range(n_touched):  # each cube once; occupied wins over free
+        c = touched[t]
+        value = log_odds[c] + (hit_value[c] if hit_stamp[c] == frame else miss)
+        log_odds[c] = min(max(value, clamp_min), clamp_max)
+        observed[c] = True
+    return n_touched
+
+
+@numba.njit(cache=True, inline="always")
+def _axis_setup(start, direction):
+    """DDA set-up on one axis: (cell, step, t to the first boundary, t between boundaries)."""
+    cell = int(math.floor(start))
+    if direction > 0:
+        return cell, 1, (cell + 1 - start) / direction, 1.0 / direction
+    if direction < 0:
+        return cell, -1, (start - cell) / -direction, -1.0 / direction
+    return cell, 0, np.inf, np.inf
+
+
+@numba.njit(cache=True)
+def _walk_free(x0, y0, z0, x1, y1, z1, shape, frame, hit_stamp, touch_stamp, touched, n_touched):
+    """Amanatides-Woo voxel walk from the camera to a region's near end (cube units), marking free."""
+    i, si, ti, di = _axis_setup(x0, x1 - x0)
+    j, sj, tj, dj = _axis_setup(y0, y1 - y0)
+    k, sk, tk, dk = _axis_setup(z0, z1 - z0)
+    i1, j1, k1 = int(math.floor(x1)), int(math.floor(y1)), int(math.floor(z1))
+    while not (i == i1 and j == j1 and k == k1):
+        if 0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]:
+            c = _flat(i, j, k, shape)
+            if hit_stamp[c] != frame:
+                n_touched = _touch(c, frame, touch_stamp, touched, n_touched)
+        if ti <= tj and ti <= tk:
+            if ti > 1.0:
+                break
+            i += si
+            ti += di
+        elif tj <= tk:
+            if tj > 1.0:
+                break
+            j += sj
+            tj += dj
+        else:
+            if tk > 1.0:
+                break
+            k += sk
+            tk += dk
+    return n_touched
+
+
+@numba.njit(cache=True, parallel=True)
+def _cast_rays(log_odds, observed, origins, dirs, max_steps, occupied_lo, free_lo, stop_at_unknown):
+    n = origins.shape[0]
+    shape = log_odds.shape
+    dist = np.empty(n)
+    hit = np.zeros(n, np.bool_)
+    unknown = np.zeros(n, np.bool_)
+    for r in numba.prange(n):
+        dist[r], hit[r], unknown[r] = _cast_one(log_odds, observed, origins[r], dirs[r], max_steps,
+                                                occupied_lo, free_lo, shape, stop_at_unknown)
+    return dist, hit, unknown
+
+
+@numba.njit(cache=True)
+def _cast_one(log_odds, observed, start, direction, max_t, occupied_lo, free_lo, shape, stop_at_unknown):
+    i, si, ti, di = _axis_setup(start[0], direction[0])
+    j, sj, tj, dj = _axis_setup(start[1], direction[1])
+    k, sk, tk, dk = _axis_setup(start[2], direction[2])
+    t_entry = 0.0
+    crossed_unknown = False
+    while t_entry <= max_t:
+        if not (0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]):
+            return t_entry, True, crossed_unknown  # the room's boundary is known (report §3.1)
+        value = log_odds[i, j, k]
+        if value >= occupied_lo:
+            return t_entry, True, crossed_unknown
+        if not observed[i, j, k] or value > free_lo:
+            if stop_at_unknown and t_entry > 0.0:
+                return t_entry, True, True
+            crossed_unknown = True
+        if ti <= tj and ti <= tk:
+            t_entry = ti
+            i += si
+            ti += di
+        elif tj <= tk:
+            t_entry = tj
+            j += sj
+            tj += dj
+        else:
+            t_entry = tk
+            k += sk
+            tk += dk
+    return max_t, False, crossed_unknown

@@ -1,0 +1,171 @@
+"""Where the target may be: the target probability p(c_i, τ) over the cubes, plus c_out (report §3).
+
+Paper symbols, named once:
+
+- ``p(c_i, τ)`` → :attr:`TargetBelief.target_prob`; ``p(c_out, τ)`` → :attr:`TargetBelief.prob_outside`;
+- ``b(c_i, f)`` → ``detection_prob`` (computed per look in :mod:`offboard.planning.detection_function`);
+- ``P[F]`` (eq. 2) → :attr:`TargetBelief.success_prob`.
+
+Beyond the report (its §6.2, "future work"): the target's facing is unknown, so each cube's mass is
+split over ``facing_sectors`` directions its pictured face could point to. A look that misses
+removes mass only from the facings it could have seen, so a second look from the same side is
+worth less than a look from a new side, and a cube is ruled out only once seen from enough sides.
+With one sector this is exactly eq. 4.
+
+Masses are stored scaled (``stored × scale`` is the probability) so that the normalisation of eq. 4
+costs one scalar instead of a pass over every cube. The planner also reads a coarse copy (cubes
+summed into ``coarse_factor``³ blocks) kept up to date by the same update.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from offboard.perception.voxel_grid import VoxelGrid
+
+
+class TargetBelief:
+    def __init__(self, grid: VoxelGrid, facing_sectors: int = 8, prob_outside: float = 0.05,
+                 coarse_factor: int = 4):
+        if facing_sectors < 1 or not 0.0 <= prob_outside < 1.0 or coarse_factor < 1:
+            raise ValueError("need facing_sectors ≥ 1, 0 ≤ prob_outside < 1 and coarse_factor ≥ 1")
+        self.grid = grid
+        self.facing_sectors = facing_sectors
+        self.coarse_factor = coarse_factor
+        self.coarse_shape = tuple(-(-n // coarse_factor) for n in grid.shape)
+        self._mass = np.zeros((*grid.shape, facing_sectors), np.float32)
+        self._coarse = np.zeros((*self.coarse_shape, facing_sectors), np.float64)
+        self.success_prob = 0.0  # P[F], eq. 2
+        self.set_prior(np.ones(grid.shape), prob_outside)
+
+    @property
+    def facing_azimuths_rad(self) -> np.ndarray:
+        """World azimuth of the face's normal in each facing sector; with a single sector, NaN: the
+        report's assumption that the target faces the camera, whichever way it looks."""
+        if self.facing_sectors == 1:
+            return np.array([np.nan])
+        return np.arange(self.facing_sectors) * (2.0 * math.pi / self.facing_sectors)
+
+    # --- reading -------------------------------------------------------------------------------------
+
+    @property
+    def target_prob(self) -> np.ndarray:
+        """p(c_i, τ) for every cube, shape ``grid.shape`` (float64)."""
+        return self._mass.sum(axis=-1, dtype=np.float64) * self._scale
+
+    @property
+    def prob_outside(self) -> float:
+        """p(c_out, τ): the target is not in the region at all."""
+        return self._outside * self._scale
+
+    @property
+    def prob_inside(self) -> float:
+        return 1.0 - self.prob_outside
+
+    def coarse_mass(self) -> np.ndarray:
+        """Probability per coarse block and facing sector, shape ``coarse_shape + (facing_sectors,)``."""
+        return self._coarse * self._scale
+
+    def mass_by_facing(self) -> np.ndarray:
+        """Probability per cube and facing sector (a copy), shape ``grid.shape + (facing_sectors,)``."""
+        return self._mass.astype(np.float64) * self._scale
+
+    def column_map(self) -> np.ndarray:
+        """Target probability summed over each vertical column (the report's target probability map)."""
+        return self.target_prob.sum(axis=2)
+
+    # --- updating ------------------------------------------------------------------------------------
+
+    def set_prior(self, weights: np.ndarray, prob_outside: float) -> None:
+        """Start afresh: p(c_i) ∝ ``weights`` (non-negative, grid-shaped), the facing unknown."""
+        weights = np.asarray(weights, np.float64)
+        if weights.shape != self.grid.shape or np.any(weights < 0) or not np.all(np.isfinite(weights)):
+            raise ValueError(f"prior weights must be finite, non-negative and of shape {self.grid.shape}")
+        total = weights.sum()
+        inside = (1.0 - prob_outside) * weights / total if total > 0 else np.zeros_like(weights)
+        self._mass[:] = (inside / self.facing_sectors)[..., None]
+        self._outside = 1.0 - inside.sum() if total > 0 else 1.0
+        self._scale = 1.0
+        self._stored_total = float(self._mass.sum(dtype=np.float64)) + self._outside
+        self._rebuild_coarse()
+
+    def reweight(self, factors: np.ndarray) -> None:
+        """Multiply every cube's mass by a grid-shaped factor and renormalise (priors that arrive
+        during the search: support surfaces, saliency)."""
+        self._mass *= np.asarray(factors, np.float32)[..., None]
+        self._renormalise()
+
+    def update_after_miss(self, cube_index: np.ndarray, detection_prob: np.ndarray) -> float:
+        """Eq. 4 after a look that did not find the target.
+
+        ``cube_index``: flat indices of the cubes the look could see; ``detection_prob``: b(c, f) for
+        each of them and each facing sector, shape (n, facing_sectors). Returns the look's detection
+        probability P_Ψ(f) (eq. 1) and folds it into P[F] (eq. 2).
+        """
+        detection_prob = np.ascontiguousarray(detection_prob, np.float32).reshape(len(cube_index), self.facing_sectors)
+        removed = _remove_seen_mass(self._mass.reshape(-1, self.facing_sectors), self._coarse.reshape(-1, self.facing_sectors),
+                                    np.ascontiguousarray(cube_index, np.int64), detection_prob,
+                                    np.array(self.grid.shape, np.int64), np.array(self.coarse_shape, np.int64),
+                                    self.coarse_factor)
+        found_prob = removed * self._scale  # eq. 1: Σ p(c) b(c, f), before the update
+        self._stored_total -= removed
+        self._scale = 1.0 / self._stored_total  # eq. 4's denominator
+        self.success_prob += (1.0 - self.success_prob) * found_prob  # eq. 2, one more term
+        if self._scale > 1e6:  # keep stored values in float32's comfortable range
+            self._renormalise()
+        return found_prob
+
+    def concentrate(self, position_m: np.ndarray, sigma_m: float) -> None:
+        """After a detection: the target is at ``position_m`` give or take ``sigma_m``."""
+        centers = self.grid.centers()
+        d2 = np.sum((centers - np.asarray(position_m)) ** 2, axis=-1)
+        weights = np.exp(-0.5 * d2 / sigma_m**2)
+        if weights.sum() <= 0:
+            raise ValueError(f"detection at {position_m} lies outside the search region")
+        facing = self._mass.sum(axis=(0, 1, 2), dtype=np.float64)
+        facing = facing / facing.sum() if facing.sum() > 0 else np.full(self.facing_sectors, 1.0 / self.facing_sectors)
+        self._mass[:] = (weights / weights.sum())[..., None] * facing
+        self._outside = 0.0
+        self._scale = 1.0
+        self._stored_total = 1.0
+        self._rebuild_coarse()
+
+    def _renormalise(self) -> None:
+        mass = self._mass.astype(np.float64) * self._scale
+        outside = self._outside * self._scale
+        total = mass.sum() + outside
+        self._mass[:] = mass / total
+        self._outside = outside / total
+        self._scale = 1.0
+        self._stored_total = float(self._mass.sum(dtype=np.float64)) + self._outside
+        self._rebuild_coarse()
+
+    def _rebuild_coarse(self) -> None:
+        f = self.coarse_factor
+        padded_shape = tuple(n * f for n in self.coarse_shape)
+        padded = np.zeros((*padded_shape, self.facing_sectors), np.float64)
+        nx, ny, nz = self.grid.shape
+        padded[:nx, :ny, :nz] = self._mass
+        cx, cy, cz = self.coarse_shape
+        self._coarse[:] = padded.reshape(cx, f, cy, f, cz, f, self.facing_sectors).sum(axis=(1, 3, 5))
+
+
+@numba.njit(cache=True)
+def _remove_seen_mass(mass, coarse, cube_index, detection_prob, shape, coarse_shape, factor):
+    """m(c, k) -= m(c, k) b(c, k) for the seen cubes, mirrored into the coarse blocks; returns Σ m b."""
+    removed_total = 0.0
+    plane = shape[1] * shape[2]
+    for n in range(cube_index.shape[0]):
+        c = cube_index[n]
+        i, j, k = c // plane, (c // shape[2]) % shape[1], c % shape[2]
+        block = ((i // factor) * coarse_shape[1] + j // factor) * coarse_shape[2] + k // factor
+        for s in range(mass.shape[1]):
+            kept = np.float64(mass[c, s]) * (1.0 - np.float64(detection_prob[n, s]))
+            removed = np.float64(mass[c, s]) - kept
+            mass[c, s] = kept
+            coarse[block, s] -= removed
+            removed_total += removed
+    return removed_total

@@ -1,0 +1,58 @@
+"""The sensed sphere (report §3.3.1): what a camera at one spot could see in every direction.
+
+Space around the camera is divided into solid angles (azimuth × elevation bins). Each has a radius:
+the distance to the first occupied cube along its central axis, capped at the detector's outer
+range; an inner radius is the detector's near limit. For positions the robot has not visited, the
+expected sensed sphere is built the same way from the map so far; unknown space is transparent
+unless ``unknown_is_opaque`` (the pessimistic choice).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from offboard.perception.occupancy import OccupancyGrid
+
+
+@dataclass(frozen=True)
+class SphereBins:
+    """Solid angles: ``az_count`` azimuth bins over the full turn, ``el_count`` elevation bins."""
+
+    az_count: int = 48  # 7.5° each
+    el_count: int = 18
+    el_min_rad: float = math.radians(-75.0)  # lowest tilt (−47°) minus half the vertical field of view
+    el_max_rad: float = math.radians(60.0)  # highest tilt (+31°) plus half the vertical field of view
+
+    def axes(self) -> np.ndarray:
+        """Unit central axis of every bin, shape (el_count, az_count, 3)."""
+        az = -math.pi + (np.arange(self.az_count) + 0.5) * (2 * math.pi / self.az_count)
+        el = self.el_min_rad + (np.arange(self.el_count) + 0.5) * (self.el_max_rad - self.el_min_rad) / self.el_count
+        ee, aa = np.meshgrid(el, az, indexing="ij")
+        return np.stack([np.cos(ee) * np.cos(aa), np.cos(ee) * np.sin(aa), np.sin(ee)], axis=-1)
+
+
+@dataclass(frozen=True)
+class SensedSpheres:
+    """Sensed spheres at several camera centres, sharing one binning."""
+
+    bins: SphereBins
+    centers_m: np.ndarray  # (P, 3)
+    radius_m: np.ndarray  # (P, el_count, az_count): first obstacle or the detector's outer range
+    inner_m: float
+    outer_m: float
+
+
+def sensed_spheres(occupancy: OccupancyGrid, centers_m: np.ndarray, bins: SphereBins, inner_m: float,
+                   outer_m: float, unknown_is_opaque: bool = False) -> SensedSpheres:
+    """Ray-cast every bin's axis from every centre on the occupancy map (pass a
+    :meth:`~OccupancyGrid.coarsened` map: a radius to within a block is plenty for planning)."""
+    centers = np.atleast_2d(np.asarray(centers_m, np.float64))
+    axes = bins.axes().reshape(-1, 3)
+    origins = np.repeat(centers, axes.shape[0], axis=0)
+    dirs = np.tile(axes, (centers.shape[0], 1))
+    hits = occupancy.cast_rays(origins, dirs, outer_m, stop_at_unknown=unknown_is_opaque)
+    radius = np.minimum(hits.distance_m, outer_m).reshape(centers.shape[0], bins.el_count, bins.az_count)
+    return SensedSpheres(bins, centers, radius, inner_m, outer_m)

@@ -1,0 +1,317 @@
+"""The search, end to end: capture → stereo → occupancy → detection → belief → decide → command.
+
+One :class:`Search` drives one robot until the target is found (a weak first detection is
+confirmed by another look), the time budget K is spent, or no reachable action is worth its time.
+The environment is unknown: the planner never reads a world file, only the room's boundary
+(report §3.1: "we assume that boundaries of Ω are known exactly").
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from collections.abc import Callable
+from typing import Literal, Protocol
+
+import numpy as np
+
+from offboard.navigation import grid_planner
+from offboard.planning import priors
+from offboard.planning.belief import TargetBelief
+from offboard.perception.detectability import DetectabilityTable
+from offboard.perception.detection.detector import Detector
+from offboard.planning.detection_function import look_footprint, visible_depth
+from offboard.navigation.localization import PoseTracker
+from offboard.navigation.navigator import Navigator
+from offboard.perception.occupancy import OccupancyConfig, OccupancyGrid
+from offboard.perception.observation import Observation, Perception
+from offboard.planning.planner import Decision, PlannerConfig, SearchPlanner
+from offboard.search.recording import Recorder
+from offboard.robot.robot_client import RobotClient
+from offboard.perception.stereo import StereoConfig, StereoMatcher
+from offboard.planning.time_model import TimeModel
+from offboard.search.top_view import LookTrace, draw_top_view
+from offboard.perception.voxel_grid import VoxelGrid
+from shared.geometry import Pose2D
+from shared.strict import bounds
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    room_m: tuple[float, float, float] = (9.0, 5.0, 2.5)  # the search region's known boundary
+    resolution_m: float = field(default=0.05, metadata=bounds(0.01, 0.5))  # cube edge (report: 5 cm)
+    facing_sectors: int = field(default=8, metadata=bounds(1, 36))  # 1: the target faces the camera
+    prob_outside: float = field(default=0.05, metadata=bounds(0.0, 0.99))  # p(c_out) at the start
+    detector: Literal["sift", "ncc", "auto"] = "sift"
+    confirm_weak: bool = True  # a weak first detection needs a second look
+    detection_sigma_m: float = field(default=0.1, metadata=bounds(0.01, 2.0))  # belief after a detection
+    behind_surface_m: float = field(default=0.12, metadata=bounds(0.0, 1.0))  # target centre behind its face
+    max_actions: int = field(default=150, metadata=bounds(1, 10_000))
+    planner: PlannerConfig = PlannerConfig()
+    occupancy: OccupancyConfig = OccupancyConfig()
+    stereo: StereoConfig = StereoConfig()
+
+
+class Policy(Protocol):
+    """What chooses the next action: the SYT planner, or a baseline built around it (experiments)."""
+
+    def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
+               path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision: ...
+
+
+@dataclass
+class SearchState:
+    """What has happened so far (the summary and the top view are made from it)."""
+
+    status: str = "running"
+    found: bool = False
+    actions: int = 0
+    positions: list[tuple[float, float]] = field(default_factory=list)
+    distance_m: float = 0.0
+    planning_ms: list[float] = field(default_factory=list)
+    looks: list[LookTrace] = field(default_factory=list)
+    trail: list[tuple[float, float]] = field(default_factory=list)
+    estimate_m: np.ndarray | None = None
+    weak_detection: np.ndarray | None = None
+    unreachable: set[int] = field(default_factory=set)
+    taken: set[int] = field(default_factory=set)  # settings looked at since the robot last moved
+
+
+class Search:
+    def __init__(self, robot: RobotClient, config: SearchConfig, detectors: dict[str, tuple[Detector, DetectabilityTable]],
+                 prior: np.ndarray, dynamic: list, recorder: Recorder | None = None, target_depth_m: float = 0.23,
+                 policy: Callable[[SearchPlanner], Policy] | None = None):
+        self.robot = robot
+        self.config = config
+        self.detectors = detectors
+        self.dynamic_priors = dynamic
+        self.recorder = recorder
+        self.target_depth_m = target_depth_m
+        info = robot.info()
+        self.info = info
+        self.mount = info.mount.to_mount()
+        self.intrinsics = info.intrinsics.to_intrinsics()
+        grid = VoxelGrid(config.room_m, config.resolution_m)
+        self.occupancy = OccupancyGrid(grid, config.occupancy)
+        self.belief = TargetBelief(grid, config.facing_sectors, config.prob_outside,
+                                   coarse_factor=max(1, round(0.2 / config.resolution_m)))
+        self.belief.set_prior(prior, config.prob_outside)
+        self.time_model = TimeModel(info.base, info.pantilt, info.camera)
+        self.planner = SearchPlanner(self.belief, config.planner, self._planning_table(), self.time_model,
+                                     self.intrinsics, self.mount)
+        self.policy: Policy = policy(self.planner) if policy else self.planner
+        self.perception = Perception(self.occupancy, StereoMatcher(config.stereo))
+        start = robot.state()
+        self._clock_start_s = start.robot_time_s
+        self.tracker = PoseTracker(start.pose.to_pose())
+        self.navigator = Navigator(robot, self.occupancy, self.tracker)
+        self.state = SearchState()
+        self.last_footprint = None
+        self._pan_tilt = (math.radians(start.pan_deg), math.radians(start.tilt_deg))
+
+    # --- the loop ------------------------------------------------------------------------------------
+
+    def run(self) -> SearchState:
+        started = time.monotonic()
+        pose = self._pose()
+        self.state.trail.append((pose.x_m, pose.y_m))
+        self.state.positions.append((pose.x_m, pose.y_m))
+        if self.recorder:
+            self.recorder.log_setup(self.config.room_m, self.intrinsics, self.mount)
+        while self.state.status == "running":
+            if self.state.actions >= self.config.max_actions:
+                self.state.status = "max_actions"
+                break
+            decision = self._decide()
+            if decision.kind == "stop":
+                self.state.status = decision.status
+                log.info("search stops: %s", decision.reason)
+            elif decision.kind == "move":
+                self._move(decision)
+            else:
+                self._look(decision)
+        self.wall_time_s = time.monotonic() - started
+        return self.state
+
+    def elapsed_s(self) -> float:
+        return self.robot.state().robot_time_s - self._clock_start_s
+
+    def _pose(self) -> Pose2D:
+        return self.tracker.world_pose(self.robot.state().pose.to_pose())
+
+    def _decide(self) -> Decision:
+        pose = self._pose()
+        started = time.perf_counter()
+        floor = self.navigator.floor_map()  # the navigator's clearance: a path here is one it drives
+        field_m = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
+        paths = grid_planner.distances_at(floor, field_m, self.planner.positions)
+        paths[list(self.state.unreachable)] = np.inf
+        decision = self.policy.decide(pose, *self._pan_tilt, self.elapsed_s(), self.occupancy, paths,
+                                      frozenset(self.state.taken))
+        self.state.planning_ms.append((time.perf_counter() - started) * 1000.0)
+        log.info("decision %d: %s — %s (P=%.3f, t=%.1f s)", len(self.state.planning_ms), decision.kind,
+                 decision.reason, decision.detection_prob, decision.time_s)
+        if self.recorder and decision.values is not None:
+            self.recorder.log_plan(decision.values, self.planner.positions, self.config.planner.grid_spacing_m,
+                                   self.config.room_m)
+        return decision
+
+    def _move(self, decision: Decision) -> None:
+        goal = decision.position_m
+        result = self.navigator.go_to(goal)
+        self.state.taken.clear()
+        self.state.distance_m += result.distance_m
+        self.state.trail.append((result.pose.x_m, result.pose.y_m))
+        if result.status == "reached":
+            self.state.positions.append((result.pose.x_m, result.pose.y_m))
+            self._look(decision)  # the look the move was chosen for
+        else:
+            index = int(np.argmin(np.hypot(*(self.planner.positions - np.array(goal)).T)))
+            self.state.unreachable.add(index)
+            log.warning("position (%.1f, %.1f) not reached: %s (%s)", goal[0], goal[1], result.status, result.reason)
+
+    def _look(self, decision: Decision) -> None:
+        pose = self._pose()
+        plan = self.time_model.look(pose.heading_rad, *self._pan_tilt, decision.azimuth_rad, decision.tilt_rad)
+        if abs(plan.base_turn_rad) > 1e-3:
+            self.robot.move(turn_deg=math.degrees(plan.base_turn_rad))
+        self.robot.look(math.degrees(plan.pan_rad), math.degrees(plan.tilt_rad))
+        self._pan_tilt = (plan.pan_rad, plan.tilt_rad)
+        capture = self.robot.capture()
+        self.last_footprint = None
+        name, (detector, table) = self._choose_detector(decision)
+        obs = self.perception.observe(capture, self.tracker.world_pose(capture.pose.to_pose()), detector)
+        self.state.actions += 1
+        self.state.taken.add(decision.setting)
+        found = self._interpret(obs, table)
+        self.state.looks.append(LookTrace(obs.pose.x_m, obs.pose.y_m, decision.azimuth_rad,
+                                          math.degrees(decision.tilt_rad), table.range_m[1], found))
+        for prior in self.dynamic_priors:
+            factor = prior(obs, self)
+            if factor is not None:
+                self.belief.reweight(factor)
+        self._record(obs, table)
+
+    def _interpret(self, obs: Observation, table: DetectabilityTable) -> bool:
+        """Found, or concentrate on a weak detection, or eq. 4 after a miss."""
+        if obs.detection is not None and obs.target_m is not None:
+            obs = self._to_target_centre(obs)
+            confirmed = (self.state.weak_detection is not None
+                         and np.linalg.norm(obs.target_m - self.state.weak_detection) < 0.3)
+            self.belief.concentrate(obs.target_m, self.config.detection_sigma_m)
+            self.state.estimate_m = obs.target_m
+            if obs.detection.confident or confirmed or not self.config.confirm_weak:
+                self.state.status, self.state.found = "found", True
+                log.info("target found at %s", np.round(obs.target_m, 2))
+                return True
+            self.state.weak_detection = obs.target_m
+            log.info("weak detection at %s: looking again to confirm", np.round(obs.target_m, 2))
+            return False
+        near, far = table.range_m
+        depth = visible_depth(obs.disparity, self.occupancy, obs.camera_in_world, obs.intrinsics,
+                              obs.baseline_m, 16, far)
+        footprint = look_footprint(self.occupancy.grid, obs.camera_in_world, obs.intrinsics, depth, 16, table,
+                                   self.belief.facing_azimuths_rad, self.config.behind_surface_m)
+        self.last_footprint = footprint
+        found_prob = self.belief.update_after_miss(footprint.cube_index, footprint.detection_prob)
+        log.info("look %d: no target; it could have found it with probability %.3f; P[F] = %.3f",
+                 self.state.actions, found_prob, self.belief.success_prob)
+        return False
+
+    def _to_target_centre(self, obs: Observation) -> Observation:
+        """The detection locates the pictured face; the target's centre is half its depth behind it,
+        along the viewing ray (the face is seen roughly head-on when it is detected at all)."""
+        ray = obs.target_m - obs.camera_in_world.translation
+        ray[2] = 0.0
+        norm = np.linalg.norm(ray)
+        if norm < 1e-6:
+            return obs
+        centre = obs.target_m + ray / norm * (self.target_depth_m / 2.0)
+        return dataclasses.replace(obs, target_m=centre)
+
+    def _choose_detector(self, decision: Decision) -> tuple[str, tuple[Detector, DetectabilityTable]]:
+        """``auto``: the detector with the best expected detection per second for this look
+        (the report's future work); otherwise the configured one."""
+        if self.config.detector != "auto":
+            return self.config.detector, self.detectors[self.config.detector]
+        best, best_value = None, -1.0
+        for name, (detector, table) in self.detectors.items():
+            scale = table.rate.max() / max(self.planner.table.rate.max(), 1e-9)
+            value = decision.detection_prob * scale / (decision.time_s + detector.cost_ms / 1000.0)
+            if value > best_value:
+                best, best_value = name, value
+        return best, self.detectors[best]
+
+    def _planning_table(self) -> DetectabilityTable:
+        if self.config.detector != "auto":
+            return self.detectors[self.config.detector][1]
+        return max((t for _, t in self.detectors.values()), key=lambda t: t.range_m[1])
+
+    def _record(self, obs: Observation, table: DetectabilityTable) -> None:
+        if not self.recorder:
+            return
+        r = self.recorder
+        r.set_time(self.state.actions, self.elapsed_s())
+        r.log_pose(obs.pose, math.radians(obs.capture.pan_deg), math.radians(obs.capture.tilt_deg), self.mount)
+        r.log_observation(obs, table.range_m[1])
+        r.log_maps(self.belief, self.occupancy)
+        r.log_stats(success_prob=self.belief.success_prob, prob_outside=self.belief.prob_outside,
+                    planning_ms=self.state.planning_ms[-1] if self.state.planning_ms else 0.0,
+                    distance_m=self.state.distance_m)
+        if self.state.estimate_m is not None:
+            r.log_target(self.state.estimate_m)
+
+    # --- outputs -------------------------------------------------------------------------------------
+
+    def summary(self) -> dict:
+        s = self.state
+        ms = np.array(s.planning_ms) if s.planning_ms else np.zeros(1)
+        return {
+            "found": s.found,
+            "status": s.status,
+            "actions": s.actions,
+            "positions_visited": len(s.positions),
+            "distance_m": round(s.distance_m, 3),
+            "robot_time_s": round(self.elapsed_s(), 3),
+            "wall_time_s": round(getattr(self, "wall_time_s", 0.0), 3),
+            "planning_ms_p50": round(float(np.percentile(ms, 50)), 2),
+            "planning_ms_p95": round(float(np.percentile(ms, 95)), 2),
+            "target_estimate_m": None if s.estimate_m is None else [round(float(v), 3) for v in s.estimate_m],
+            "prob_outside": round(float(self.belief.prob_outside), 6),
+            "prob_inside": round(float(self.belief.prob_inside), 6),
+            "success_prob": round(float(self.belief.success_prob), 6),
+            "cost_function": self.config.planner.cost_function,
+            "detector": self.config.detector,
+            "decisions": len(s.planning_ms),
+        }
+
+    def write_top_view(self, path: Path) -> None:
+        s = self.state
+        floor = self.occupancy.floor_map(self.info.base.radius_m, self.info.base.height_m)
+        title = (f"{s.status}: {s.actions} looks, {len(s.positions)} positions, {s.distance_m:.1f} m, "
+                 f"{self.elapsed_s() / 60:.1f} min robot time")
+        draw_top_view(path, self.config.room_m, floor, s.trail, s.looks, self.intrinsics.hfov_rad, s.estimate_m, title)
+
+
+def build_prior(grid: VoxelGrid, specs: list[str]) -> np.ndarray:
+    """Static priors from ``--prior`` specs, mixed with equal weights: ``uniform``, ``hints:FILE``,
+    ``last-seen:X,Y,Z[,SECONDS]``. (``surfaces`` and ``saliency`` are dynamic; see :func:`dynamic_priors`.)"""
+    weighted = []
+    for spec in specs:
+        kind, _, arg = spec.partition(":")
+        if kind == "uniform":
+            weighted.append((1.0, priors.uniform(grid)))
+        elif kind == "hints":
+            weighted.append((1.0, priors.hints(grid, priors.load_hints(Path(arg)))))
+        elif kind == "last-seen":
+            values = [float(v) for v in arg.split(",")]
+            weighted.append((1.0, priors.last_seen(grid, np.array(values[:3]), values[3] if len(values) > 3 else 0.0)))
+    if not weighted:
+        weighted.append((1.0, priors.uniform(grid)))
+    return priors.combine(grid, weighted)

@@ -1,0 +1,146 @@
+"""One search as a user runs it: build everything from the options, run, write the outputs.
+
+Outputs in the ``--out`` folder: ``summary.json``, ``search.rrd`` (Rerun), ``search.png`` (top
+view) and ``search.log``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+from offboard.planning import priors
+from offboard.perception.detectability import DetectabilityTable
+from offboard.perception.detection.detector import Detector, make_detector
+from offboard.perception.detection.target_model import TargetModel
+from offboard.search.recording import Recorder
+from offboard.robot.robot_client import RobotClient
+from offboard.search.loop import Search, SearchConfig, build_prior
+from offboard.perception.voxel_grid import VoxelGrid
+from shared.config import load_config
+from shared.geometry import Intrinsics
+from shared.transport import TransportConfig
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SearchRequest:
+    pictures: tuple[Path, ...]
+    target_size_m: tuple[float, float, float]
+    room_m: tuple[float, float, float]
+    target_sides: int = 1  # pictured vertical faces: 1, or 4 (then it faces every camera: no facing to track)
+    cost: int = 3
+    priors: tuple[str, ...] = ("uniform",)
+    budget_s: float = 1800.0
+    move_threshold: float | None = None
+    detector: str = "sift"
+    detectability: tuple[str, ...] = ()  # NAME=FILE
+    config_path: Path | None = None
+    out_dir: Path = Path("search-out")
+    spawn: bool = False
+    viewer_url: str | None = None
+    record: bool = True  # write search.rrd (experiments turn it off to save time and disk)
+
+
+def search_config(request: SearchRequest) -> SearchConfig:
+    base = load_config(SearchConfig, request.config_path)
+    planner = dataclasses.replace(base.planner, cost_function=request.cost, budget_s=request.budget_s,
+                                  **({} if request.move_threshold is None else {"move_threshold": request.move_threshold}))
+    facing = {"facing_sectors": 1} if request.target_sides == 4 else {}
+    return dataclasses.replace(base, room_m=request.room_m, detector=request.detector, planner=planner, **facing)
+
+
+def detectability_table(name: str, detector: Detector, files: dict[str, Path]) -> DetectabilityTable:
+    """The measured table: given on the command line, else the one shipped for the default target,
+    else a nominal one over the detector's own range."""
+    if name in files:
+        return DetectabilityTable.load(files[name])
+    shipped = resources.files("offboard.perception.detection") / "tables" / f"{name}.json"
+    if shipped.is_file():
+        return DetectabilityTable.load(Path(str(shipped)))
+    near, far = detector.range_m
+    log.warning("no measured detectability table for %s: using a nominal one over %.2f-%.2f m", name, near, far)
+    return DetectabilityTable.nominal(name, near_m=near, far_m=far, cost_ms=detector.cost_ms)
+
+
+def build_detectors(request: SearchRequest, model: TargetModel, intrinsics: Intrinsics) -> dict:
+    files = dict(_name_file(spec) for spec in request.detectability)
+    names = ("sift", "ncc") if request.detector == "auto" else (request.detector,)
+    detectors = {}
+    for name in names:
+        detector = make_detector(name, model, intrinsics)
+        detectors[name] = (detector, detectability_table(name, detector, files))
+    return detectors
+
+
+def dynamic_priors(specs: tuple[str, ...], grid: VoxelGrid, model: TargetModel) -> list:
+    """Type 2 (surfaces) and type 4 (saliency): factors applied to the belief after every look."""
+    made = []
+    if "surfaces" in specs:
+        support = priors.SupportSurfaces(grid)
+        made.append(lambda obs, search: support.update(search.occupancy))
+    if "saliency" in specs:
+        saliency = priors.Saliency(model.pictures)
+        made.append(lambda obs, search: None if search.last_footprint is None else saliency.factor(
+            obs.capture.left, grid, search.last_footprint.cube_index, obs.camera_in_world, obs.intrinsics))
+    return made
+
+
+def run_search(transport: TransportConfig, request: SearchRequest, policy=None, detector_cache: dict | None = None) -> dict:
+    """Run one search; ``policy`` (a factory taking the SearchPlanner) replaces the SYT decisions.
+    ``detector_cache`` keeps the detectors (and their tables) for later searches of the same target
+    with the same camera: building a SIFT model takes seconds."""
+    out = request.out_dir
+    out.mkdir(parents=True, exist_ok=True)
+    file_log = logging.FileHandler(out / "search.log", mode="w")
+    file_log.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    root = logging.getLogger()
+    root.addHandler(file_log)
+    recorder = None
+    if request.record or request.spawn or request.viewer_url:
+        recorder = Recorder(out / "search.rrd" if request.record else None, spawn=request.spawn,
+                            connect_url=request.viewer_url)
+        recorder.attach_logging(root)
+    try:
+        config = search_config(request)
+        model = TargetModel.from_files(request.pictures, request.target_size_m)
+        with transport.open() as session, RobotClient(session, transport.robot_id) as robot:
+            info = robot.wait_for_robot()
+            intrinsics = info.intrinsics.to_intrinsics()
+            cache = {} if detector_cache is None else detector_cache
+            key = (request.detector, request.pictures, request.target_size_m, request.detectability, intrinsics)
+            if key not in cache:
+                cache[key] = build_detectors(request, model, intrinsics)
+            detectors = cache[key]
+            grid = VoxelGrid(config.room_m, config.resolution_m)
+            static = [p for p in request.priors if p.split(":")[0] in ("uniform", "hints", "last-seen")]
+            search = Search(robot, config, detectors, build_prior(grid, static),
+                            dynamic_priors(request.priors, grid, model), recorder, model.size_m[0], policy)
+            try:
+                search.run()
+            finally:
+                robot.stop()
+            summary = {**search.summary(), "prior": "+".join(request.priors)}
+            search.write_top_view(out / "search.png")
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        log.info("summary: %s", summary)
+        return summary
+    finally:
+        if recorder:
+            recorder.detach_logging(root)
+            recorder.close()
+        root.removeHandler(file_log)
+        file_log.close()
+
+
+def _name_file(spec: str) -> tuple[str, Path]:
+    name, sep, path = spec.partition("=")
+    if not sep:
+        raise ValueError(f"--detectability takes NAME=FILE, not {spec!r}")
+    return name, Path(path)
+

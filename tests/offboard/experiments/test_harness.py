@@ -1,0 +1,317 @@
+"""The experiment harness: the grid, resuming, the tables prior, the report, the baselines, one real sweep."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from offboard.experiments import harness as experiment
+from offboard.navigation import grid_planner
+from offboard.experiments.baselines import BASELINES, BaselineContext
+from offboard.planning.belief import TargetBelief
+from offboard.perception.detectability import DetectabilityTable
+from offboard.experiments.harness import PAPER, Run, build_runs, make_row
+from offboard.experiments.report import COLUMNS, REPORT, append_row, conclusions, load_results, render, write_report
+from offboard.experiments.world_facts import (DRIVE_CLEARANCE_M, Obstacle, SeeingCriteria, Truth, load_facts, robot_starts, seeing_cells, tables_hints,
+                                       target_placements, true_floor_map, viewpoint)
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.planning.planner import PlannerConfig, SearchPlanner
+from offboard.planning.priors import HintBox, hints, load_hints
+from offboard.planning.time_model import TimeModel
+from offboard.perception.voxel_grid import VoxelGrid
+from shared.geometry import HeadMount, Intrinsics, Pose2D
+from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
+
+SUMMARY = {"found": True, "status": "found", "actions": 5, "positions_visited": 2, "distance_m": 3.0,
+           "robot_time_s": 240.0, "wall_time_s": 30.0, "planning_ms_p50": 100.0, "planning_ms_p95": 150.0,
+           "target_estimate_m": [1.7, 4.6, 0.87], "prob_outside": 0.0, "prob_inside": 1.0, "success_prob": 0.4,
+           "cost_function": 3, "detector": "sift", "decisions": 5, "prior": "uniform"}
+
+
+def _args(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    experiment.add_arguments(parser)
+    return parser.parse_args(list(argv))
+
+
+# --- the grid --------------------------------------------------------------------------------------
+
+def test_the_paper_preset_is_the_reports_160_runs():
+    runs = build_runs(experiment.grid_from_args(_args("--preset", "paper")))
+    assert len(runs) == 160 and len({r.key for r in runs}) == 160
+    assert {r.method for r in runs} == {"syt"} and {r.cost for r in runs} == {1, 2, 3, 4}
+    assert {r.prior for r in runs} == {"uniform", "tables"} and {r.world for r in runs} == {"paper-lab"}
+    assert len({r.start for r in runs}) == 5 and len({r.target for r in runs}) == 4
+    with_baselines = build_runs(experiment.grid_from_args(_args("--preset", "paper", "--baselines")))
+    assert len(with_baselines) == 160 + len(BASELINES) * 5 * 4 * 2  # baselines once per start × target × prior
+    assert all(r.cost is None for r in with_baselines if r.method != "syt")
+
+
+def test_paper_lab_targets_sit_on_table_tops_facing_open_floor_and_starts_are_free():
+    world = load_facts("paper-lab")
+    tables = world.tables()
+    for x, y, z, yaw in target_placements(world, 4):
+        table = next(t for t in tables if t.min_m[0] <= x <= t.max_m[0] and t.min_m[1] <= y <= t.max_m[1])
+        assert z == table.max_m[2]
+        ahead = np.array([x, y]) + 0.6 * np.array([math.cos(math.radians(yaw)), math.sin(math.radians(yaw))])
+        assert 0 < ahead[0] < world.room_m[0] and 0 < ahead[1] < world.room_m[1], "faces a wall"
+    floor = true_floor_map(world.truth(world.target))
+    for x, y, _ in robot_starts(world, 5):
+        assert not floor.blocked[int(x / floor.resolution_m), int(y / floor.resolution_m)]
+
+
+@pytest.mark.parametrize("name", ["paper-lab", "office", "high-shelf"])
+def test_derived_starts_keep_their_margin_from_every_obstacle_however_thin(name):
+    world = load_facts(name)
+    drivable = true_floor_map(world.truth(world.target), SeeingCriteria(robot_radius_m=DRIVE_CLEARANCE_M))
+    reach = grid_planner.distance_field(drivable, world.start[:2])
+    for x, y, _ in robot_starts(world, 5)[1:]:  # the first is the world's own
+        assert np.isfinite(reach[int(x / 0.05), int(y / 0.05)]), (name, (x, y), "a pocket the robot cannot leave")
+        for box in world.obstacles:
+            if box.min_m[2] < SeeingCriteria().robot_height_m:
+                gap = np.hypot(max(box.min_m[0] - x, 0.0, x - box.max_m[0]), max(box.min_m[1] - y, 0.0, y - box.max_m[1]))
+                assert gap >= 0.45 - 0.05, (name, (x, y), box.name, gap)  # margin, less a fine cell
+
+
+@pytest.mark.parametrize("name", ["paper-lab", "office", "high-shelf"])
+def test_every_placement_is_seen_from_somewhere_the_robot_can_drive_to(name):
+    world = load_facts(name)  # office's west desks face a pocket between desks and chairs: left out
+    drive = SeeingCriteria(robot_radius_m=DRIVE_CLEARANCE_M)
+    for placement in target_placements(world, 4):
+        assert math.isfinite(viewpoint(world.truth(placement), world.start[:2], drive)[1]), placement
+
+
+def test_rows_have_every_column_and_measure_the_estimate_and_spl():
+    world = load_facts("paper-lab")
+    run = Run("syt", "paper-lab", (4.5, 0.6, 90.0), (1.7, 4.65, 0.75, -90.0), 3, "uniform", 0)
+    row = make_row(run, world, SUMMARY, 42.0)
+    assert set(row) <= set(COLUMNS) and {k for k in SUMMARY if k != "prior"} <= set(row)
+    assert row["estimate_error_m"] == pytest.approx(math.dist((1.7, 4.6, 0.87), (1.7, 4.65, 0.865)), abs=1e-3)
+    assert 2.0 < row["shortest_path_m"] < 3.0 and row["spl"] == pytest.approx(row["shortest_path_m"] / 3.0, abs=1e-3)
+    failed = make_row(run, world, None, 1.0, "exit 2: robot.start overlaps")
+    assert failed["status"].startswith("error") and failed["success"] is False
+
+
+def test_an_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path, monkeypatch):
+    world = load_facts("paper-lab")
+    runs = build_runs(PAPER)[:6]
+    results = tmp_path / "results.csv"
+    for run in runs[:3]:
+        append_row(results, make_row(run, world, SUMMARY, 1.0))
+    append_row(results, make_row(runs[3], world, None, 1.0, "timeout"))  # failed: tried again
+    executed = []
+    monkeypatch.setattr(experiment, "_prepare", lambda todo, out: {})
+    def execute(run, prepared, settings, workers):
+        executed.append(run)
+        return make_row(run, world, SUMMARY, 1.0)
+    monkeypatch.setattr(experiment, "_execute", execute)
+    progress = experiment.sweep(runs, experiment.SweepSettings(tmp_path, jobs=2))
+    assert sorted(r.key for r in executed) == sorted(r.key for r in runs[3:])
+    assert (progress.skipped, progress.done, progress.failed) == (3, 3, 0)
+    assert {r["key"] for r in load_results(results)} == {r.key for r in runs}
+
+
+def test_the_tables_prior_is_the_layer_above_each_table(tmp_path):
+    world_file = tmp_path / "two-tables.toml"
+    world_file.write_text("""
+name = "two-tables"
+[room]
+size = [6.0, 4.0, 2.5]
+[[obstacle]]
+name = "a"
+kind = "table"
+min = [0.5, 3.0, 0.0]
+max = [2.5, 4.0, 0.7]
+[[obstacle]]
+name = "b"
+kind = "table"
+min = [4.0, 1.0, 0.0]
+max = [5.0, 2.0, 0.8]
+[[obstacle]]
+name = "crate"
+kind = "crate"
+min = [3.0, 0.0, 0.0]
+max = [3.5, 0.5, 0.5]
+[target]
+size = [0.23, 0.23, 0.23]
+position = [1.5, 3.5, 0.7]
+[robot]
+start = [1.0, 1.0]
+""")
+    hints_file = tmp_path / "tables.toml"
+    hints_file.write_text(tables_hints(load_facts(str(world_file))))
+    boxes = {h.name: h for h in load_hints(hints_file)}
+    assert set(boxes) == {"a", "b"}
+    assert boxes["a"].min == (0.5, 3.0, 0.7) and boxes["a"].max == (2.5, 4.0, pytest.approx(1.0))
+    assert boxes["b"].min[2] == 0.8 and boxes["b"].max[2] == pytest.approx(1.1)
+    assert boxes["a"].weight + boxes["b"].weight == pytest.approx(0.9)
+    assert boxes["a"].weight == pytest.approx(2 * boxes["b"].weight)  # shared by area: 2 m² against 1 m²
+
+
+# --- the report ------------------------------------------------------------------------------------
+
+def _synthetic_results(path: Path) -> None:
+    """Two runs per cell whose means are the report's own numbers."""
+    world = load_facts("paper-lab")
+    for prior, table in REPORT.items():
+        for c in range(4):
+            for k, spread in enumerate((-0.1, 0.1)):
+                summary = {**SUMMARY, "actions": table["actions"][c] + spread,
+                           "robot_time_s": table["time_min"][c] * 60, "distance_m": table["distance_m"][c]}
+                run = Run("syt", "paper-lab", (4.5, 0.6, 90.0), (1.7, 4.65, 0.75, -90.0), c + 1, prior, k)
+                append_row(path, make_row(run, world, summary, 60.0))
+    miss = Run("syt", "paper-lab", (4.5, 0.6, 90.0), (1.7, 4.65, 0.75, -90.0), 3, "uniform", 9)
+    append_row(path, make_row(miss, world, {**SUMMARY, "found": False, "status": "budget",
+                                                       "target_estimate_m": None}, 60.0))
+
+
+def test_the_report_has_the_reports_layout_and_checks_its_six_conclusions(tmp_path):
+    _synthetic_results(tmp_path / "results.csv")
+    written = write_report(tmp_path / "results.csv", tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    for label in ("| Average per run | Cost(1) | Cost(2) | Cost(3) | Cost(4) |", "| Number of actions |",
+                  "| Total time (min.) |", "| Distance traveled (m.) |", "No knowledge", "Knowledge",
+                  "averaged over successful runs", "(report: 91%)", "SPL", "Planning p50 / p95"):
+        assert label in text, label
+    assert "| Number of actions | 9.44 (9.4375) | 8.72 (8.722) | 8.45 (8.45) | 8.73 (8.733) |" in text
+    assert "SYT success rate: **94.1%**" in text  # 16 of 17 runs
+    verdicts = [line for line in text.splitlines() if line[:2] in {f"{i}." for i in range(1, 7)}]
+    assert len(verdicts) == 6 and all("**agrees**" in v for v in verdicts)
+    for path in written[1:]:
+        assert cv2.imread(str(path)) is not None
+
+
+def test_the_checks_agree_with_the_report_and_notice_a_contradiction():
+    assert all(v.agrees for v in conclusions({p: {m: list(v) for m, v in t.items()} for p, t in REPORT.items()}))
+    swapped = {"uniform": {m: list(v) for m, v in REPORT["tables"].items()},
+               "tables": {m: list(v) for m, v in REPORT["uniform"].items()}}
+    assert conclusions(swapped)[0].agrees is False and conclusions(swapped)[4].agrees is False
+    assert render([]).count("**cannot tell**") == 6
+
+
+# --- the baselines ---------------------------------------------------------------------------------
+
+ROOM = VoxelGrid((6.0, 4.0, 2.5), 0.05)
+TRUTH = Truth((6.0, 4.0, 2.5), (Obstacle((2.5, 2.5, 0.0), (3.5, 4.0, 0.8)),), (3.0, 3.2, 0.915), -90.0)
+
+
+def _planner() -> SearchPlanner:
+    belief = TargetBelief(ROOM, facing_sectors=1, prob_outside=0.0)
+    belief.set_prior(hints(ROOM, (HintBox((2.5, 2.5, 0.8), (3.5, 4.0, 1.1), 0.9),)), prob_outside=0.0)
+    return SearchPlanner(belief, PlannerConfig(), DetectabilityTable.nominal(near_m=0.3, far_m=2.5),
+                         TimeModel(BaseLimits(), PanTiltLimits(), CameraTiming()), Intrinsics.from_fov(640, 480, 66.0),
+                         HeadMount())
+
+
+def _decide(policy, planner, pose, taken=frozenset(), elapsed_s=0.0):
+    paths = np.hypot(*(planner.positions - (pose.x_m, pose.y_m)).T)
+    return policy.decide(pose, 0.0, 0.0, elapsed_s, OccupancyGrid(ROOM), paths, frozenset(taken))
+
+
+@pytest.mark.parametrize("name", ["exhaustive", "random", "frontier"])
+def test_tours_look_around_then_move_then_stop(name):
+    planner = _planner()
+    policy = BASELINES[name](BaselineContext(seed=1))(planner)
+    pose, everything = Pose2D(1.0, 1.0, 0.0), set(range(len(planner.settings)))
+    first = _decide(policy, planner, pose)
+    assert first.kind == "look" and 0 <= first.setting < len(planner.settings) and first.time_s > 0
+    assert math.isclose(first.azimuth_rad, planner.settings.azimuth_rad[first.setting])
+    second = _decide(policy, planner, pose, {first.setting})
+    assert second.kind == "look" and second.setting != first.setting
+    moves = []
+    for _ in range(len(planner.positions) + 1):
+        d = _decide(policy, planner, pose, everything)
+        if d.kind != "move":
+            break
+        assert any(np.allclose(d.position_m, p) for p in planner.positions) and 0 <= d.setting < len(planner.settings)
+        moves.append(d.position_m)
+    assert d.kind == "stop" and d.status == "exhausted"
+    assert len(set(moves)) == len(moves) == len(planner.positions) - 1  # every other candidate once
+    late = BASELINES[name](BaselineContext(seed=1))(planner)
+    assert _decide(late, planner, pose, elapsed_s=planner.config.budget_s).status == "budget"
+
+
+def test_the_random_tour_is_seeded():
+    def order(seed: int) -> list:
+        planner = _planner()
+        policy = BASELINES["random"](BaselineContext(seed=seed))(planner)
+        everything = set(range(len(planner.settings)))
+        return [_decide(policy, planner, Pose2D(1.0, 1.0, 0.0), everything).position_m for _ in range(5)]
+    assert order(3) == order(3) and order(3) != order(4)
+
+
+def test_the_oracle_drives_to_the_nearest_seeing_position_and_looks_at_the_target():
+    planner = _planner()
+    policy = BASELINES["oracle"](BaselineContext(truth=TRUTH))(planner)
+    start = Pose2D(5.5, 0.5, math.pi)
+    move = _decide(policy, planner, start)
+    goal, path_m = viewpoint(TRUTH, (5.5, 0.5), BaselineContext().config.oracle_view)
+    assert move.kind == "move" and np.allclose(move.position_m, goal) and 0 < path_m < 5.0
+    face = np.array([3.0, 3.2 - 0.115])
+    assert 1.0 <= np.hypot(*(np.array(goal) - face)) <= 2.0 and goal[1] < face[1]  # in front, in range
+    assert viewpoint(TRUTH, (5.5, 0.5))[1] < path_m  # SPL's looser "sees" is nearer
+    there = Pose2D(*goal, 0.0)
+    look = _decide(policy, planner, there)
+    assert look.kind == "look" and math.isclose(look.azimuth_rad, math.atan2(3.2 - goal[1], 3.0 - goal[0]))
+    assert look.tilt_rad < 0  # the target is below the camera
+    with pytest.raises(ValueError):
+        BASELINES["oracle"](BaselineContext())
+
+
+def test_a_tall_obstacle_hides_the_target_and_a_low_one_does_not():
+    def sees_from(box_top_m: float) -> bool:
+        truth = Truth((6.0, 4.0, 2.5), (Obstacle((2.5, 1.8, 0.0), (3.5, 2.0, box_top_m)),), (3.0, 3.5, 0.9), -90.0)
+        floor = true_floor_map(truth)
+        return bool(seeing_cells(truth, floor)[int(3.0 / 0.05), int(1.2 / 0.05)])  # 2.2 m straight ahead
+    assert sees_from(0.5) and not sees_from(1.5)
+
+
+def test_nothing_sees_a_target_facing_a_wall():
+    hidden = Truth((6.0, 4.0, 2.5), (), (3.0, 3.85, 0.9), 90.0)  # its face a few cm from the wall
+    assert viewpoint(hidden, (1.0, 1.0)) == (None, math.inf)
+
+
+# --- one real sweep --------------------------------------------------------------------------------
+
+@pytest.mark.integration
+def test_a_tiny_sweep_end_to_end_and_a_redone_run_gives_the_same_numbers(tmp_path):
+    argv = ("--out", str(tmp_path), "--start", "1.7,3.3,90", "--target", "1.7,4.65,0.75,-90", "--costs", "3",
+            "--limit", "2", "--jobs", "2")
+    assert experiment.main(_args(*argv)) == 0
+    rows = {r["prior"]: r for r in csv.DictReader((tmp_path / "results.csv").open())}
+    assert set(rows) == {"uniform", "tables"} and all(r["success"] == "True" for r in rows.values())
+    assert float(rows["uniform"]["estimate_error_m"]) < 0.3 and (tmp_path / "report.md").is_file()
+    lines = (tmp_path / "results.csv").read_text().splitlines()
+    (tmp_path / "results.csv").write_text("\n".join(lines[:-1]) + "\n")  # as if the last run never finished
+    assert experiment.main(_args(*argv)) == 0
+    again = list(csv.DictReader((tmp_path / "results.csv").open()))
+    assert len(again) == 2
+    redone, before = again[-1], next(csv.DictReader([lines[0], lines[-1]]))
+    for column in ("actions", "distance_m", "robot_time_s", "target_estimate_m", "status"):
+        assert redone[column] == before[column], column
+
+
+@pytest.mark.integration
+def test_a_failed_run_is_a_row_naming_why_and_the_worker_goes_on(tmp_path):
+    impossible = "4.5,2.5,0.3,-90"  # inside the centre table: the simulator refuses the placement
+    argv = ("--out", str(tmp_path), "--start", "1.7,3.3,90", "--target", impossible, "--target", "1.7,4.65,0.75,-90",
+            "--costs", "3", "--priors", "uniform", "--jobs", "1")
+    assert experiment.main(_args(*argv)) == 1  # a run failed
+    rows = {r["target"]: r for r in csv.DictReader((tmp_path / "results.csv").open())}
+    assert "overlaps obstacle" in rows[impossible]["status"] and rows[impossible]["success"] == "False"
+    assert rows["1.7,4.65,0.75,-90"]["success"] == "True"
+
+
+def test_tours_let_syt_confirm_a_weak_detection():
+    planner = _planner()
+    planner.belief.concentrate(np.array([3.0, 2.4, 0.9]), 0.1)  # what a weak detection does
+    policy = BASELINES["exhaustive"](BaselineContext())(planner)
+    everything = set(range(len(planner.settings)))
+    d = _decide(policy, planner, Pose2D(3.0, 1.2, 0.0), everything - {4})
+    assert d.detection_prob > 0.3 and "look around" not in d.reason

@@ -1,0 +1,175 @@
+"""Scan matching and odometry fusion on synthetic maps and scans with known offsets."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from offboard.navigation.localization import (MatchConfig, OdometryModel, PoseTracker, ScanMatcher, likelihood_field,
+                                   map_field, scan_from_disparity)
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.perception.voxel_grid import VoxelGrid
+from shared.geometry import HeadMount, Intrinsics, Pose2D
+
+RES = 0.05
+ROOM = (9.0, 5.0)
+BOXES = ((3.9, 2.25, 5.1, 2.75), (7.0, 4.45, 8.0, 5.0), (0.0, 1.2, 0.45, 3.8))  # x0, y0, x1, y1
+
+
+def box_outlines() -> np.ndarray:
+    """Occupied floor cells on the boxes' outlines (what stereo maps of a box: its faces)."""
+    occupied = np.zeros((180, 100), bool)
+    for x0, y0, x1, y1 in BOXES:
+        i0, j0, i1, j1 = (int(round(v / RES)) for v in (x0, y0, x1, y1))
+        occupied[i0:i1, j0:j1] = True
+        occupied[i0 + 1:i1 - 1, j0 + 1:j1 - 1] = False
+    return occupied
+
+
+def surface_points(step_m: float = 0.01) -> np.ndarray:
+    """Points on the walls and on the faces of the boxes (at the outline cells' centres)."""
+    pts = [np.stack([np.arange(0, ROOM[0], step_m), np.full(int(ROOM[0] / step_m), y)], 1) for y in (0.0, ROOM[1])]
+    pts += [np.stack([np.full(int(ROOM[1] / step_m), x), np.arange(0, ROOM[1], step_m)], 1) for x in (0.0, ROOM[0])]
+    h = RES / 2
+    for x0, y0, x1, y1 in BOXES:
+        xs, ys = np.arange(x0 + h, x1 - h, step_m), np.arange(y0 + h, y1 - h, step_m)
+        pts += [np.stack([xs, np.full_like(xs, y)], 1) for y in (y0 + h, y1 - h)]
+        pts += [np.stack([np.full_like(ys, x), ys], 1) for x in (x0 + h, x1 - h)]
+    return np.concatenate(pts)
+
+
+def camera_scan(true_pose: Pose2D, rng: np.random.Generator, fov_deg: float = 66.0, noise_m: float = 0.02,
+                max_range_m: float = 4.5, n: int = 600) -> np.ndarray:
+    """What a forward camera sees of the surfaces (no occlusion), noisy, in the robot frame."""
+    pts = surface_points()
+    d = pts - (true_pose.x_m, true_pose.y_m)
+    bearing = np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - true_pose.heading_rad)))
+    keep = (np.hypot(*d.T) < max_range_m) & (np.abs(bearing) < math.radians(fov_deg / 2))
+    pts = pts[keep] + rng.normal(0.0, noise_m, (int(keep.sum()), 2))
+    pts = pts[np.linspace(0, len(pts) - 1, min(n, len(pts))).astype(int)]
+    c, s = math.cos(true_pose.heading_rad), math.sin(true_pose.heading_rad)
+    return (pts - (true_pose.x_m, true_pose.y_m)) @ np.array([[c, -s], [s, c]])
+
+
+@pytest.mark.parametrize("true_pose,offset", [
+    (Pose2D(2.0, 2.5, 0.0), (0.12, -0.08, 3.0)),
+    (Pose2D(6.0, 1.5, 2.6), (-0.15, 0.10, -2.5)),
+    (Pose2D(3.0, 1.0, 0.9), (0.05, 0.15, 4.0)),
+    (Pose2D(6.5, 3.5, -2.0), (-0.2, -0.1, -1.0)),
+])
+def test_a_displaced_scan_is_pulled_back_onto_the_map(true_pose, offset):
+    rng = np.random.default_rng(0)
+    field = likelihood_field(box_outlines(), RES)
+    scan = camera_scan(true_pose, rng, fov_deg=90.0)
+    prior = Pose2D(true_pose.x_m + offset[0], true_pose.y_m + offset[1],
+                   true_pose.heading_rad + math.radians(offset[2]))
+    result = ScanMatcher().match(scan, prior, field)
+    assert result.accepted
+    assert math.hypot(result.pose.x_m - true_pose.x_m, result.pose.y_m - true_pose.y_m) < 0.03
+    assert abs(math.degrees(result.pose.heading_rad - true_pose.heading_rad)) < 0.75
+
+
+def test_a_single_wall_constrains_only_across_it():
+    field = likelihood_field(np.zeros((180, 100), bool), RES)  # walls only
+    true_pose = Pose2D(4.5, 3.5, math.pi / 2)  # facing the north wall, 1.5 m away
+    scan = camera_scan(true_pose, np.random.default_rng(1), fov_deg=40.0)
+    result = ScanMatcher().match(scan, Pose2D(4.6, 3.6, math.pi / 2), field)
+    assert result.accepted and abs(result.pose.y_m - 3.5) < 0.03
+    sx, sy = np.sqrt(np.diag(result.covariance))[:2]
+    assert sx > 3 * sy  # along the wall, the scan says little
+
+
+def test_too_few_points_or_points_off_the_map_are_not_accepted():
+    field = likelihood_field(box_outlines(), RES)
+    matcher = ScanMatcher()
+    few = camera_scan(Pose2D(2.0, 2.5, 0.0), np.random.default_rng(2))[:20]
+    assert not matcher.match(few, Pose2D(2.0, 2.5, 0.0), field).accepted
+    junk = np.random.default_rng(3).uniform(0.5, 3.0, (400, 2))  # a cloud in free space
+    result = matcher.match(junk, Pose2D(2.0, 2.5, 0.0), field)
+    assert not result.accepted and "on the map" in result.reason
+
+
+def test_scan_from_disparity_projects_a_wall_to_the_floor():
+    k = Intrinsics.from_fov(64, 48, 66.0)
+    mount = HeadMount()
+    depth = 2.0  # a wall 2 m ahead, facing the camera (pan 0, tilt 0)
+    disparity = np.full((48, 64), k.fx_px * mount.baseline_m / depth, np.float32)
+    config = MatchConfig(stride_px=1, max_points=10_000)
+    xy = scan_from_disparity(disparity, k, mount, 0.0, 0.0, config)
+    assert np.allclose(xy[:, 0], depth, atol=1e-3)
+    half_width = depth * math.tan(math.radians(33.0))
+    assert xy[:, 1].min() == pytest.approx(-half_width, abs=0.1)
+    assert xy[:, 1].max() == pytest.approx(half_width, abs=0.1)
+    # rows whose points lie below band_min_m (the floor) or above band_max_m are dropped
+    vertical = depth * np.tan(np.linspace(-k.vfov_rad / 2, k.vfov_rad / 2, 48))
+    expected_rows = np.count_nonzero((mount.height_m - vertical >= 0.15) & (mount.height_m - vertical <= 2.2))
+    assert abs(xy.shape[0] / 64 - expected_rows) <= 1
+
+
+def test_map_field_uses_occupied_columns_and_walls():
+    occupancy = OccupancyGrid(VoxelGrid((9.0, 5.0, 2.5), RES))
+    occupancy.log_odds[80:82, 50:52, 5:20] = 2.0  # a post at (4.05, 2.55), 0.25-1.0 m high
+    field = map_field(occupancy)
+    on_post, on_wall, free = field.at(np.array([[4.05, 2.55], [0.0, 1.0], [2.0, 1.0]]))
+    assert on_post > -0.2 and on_wall > -0.2 and free < -2.0  # the wall lies between two cell centres
+
+
+# --- fusion ----------------------------------------------------------------------------------------
+
+def test_tracker_maps_odometry_to_world_and_back():
+    tracker = PoseTracker(Pose2D(1.0, 1.0, 0.0), world=Pose2D(1.2, 0.9, 0.1))  # an offset transform
+    odom = Pose2D(2.0, 1.0, 0.0)
+    world = tracker.world_pose(odom)
+    assert world.heading_rad == pytest.approx(0.1)
+    assert tracker.odom_point((world.x_m, world.y_m)) == pytest.approx((odom.x_m, odom.y_m), abs=1e-9)
+    moved = tracker.world_pose(Pose2D(3.0, 1.0, 0.0))  # the correction travels with the robot
+    assert (moved.x_m - world.x_m, moved.y_m - world.y_m) == pytest.approx((math.cos(0.1), math.sin(0.1)))
+
+
+def test_covariance_grows_with_motion_and_shrinks_with_a_match():
+    tracker = PoseTracker(Pose2D(0.0, 0.0, 0.0))
+    before = np.trace(tracker.covariance[:2, :2])
+    tracker.predict(Pose2D(5.0, 0.0, 0.0))
+    grown = tracker.covariance.copy()
+    assert np.trace(grown[:2, :2]) > before + (0.03 * 5.0) ** 2 * 0.9
+    assert grown[1, 1] > grown[0, 0]  # heading drift bends the path sideways: lateral error dominates
+    true_pose = Pose2D(5.05, 0.1, 0.01)
+    assert tracker.correct(Pose2D(5.0, 0.0, 0.0), true_pose, np.diag([0.02 ** 2, 0.02 ** 2, 0.01 ** 2]))
+    assert np.trace(tracker.covariance) < np.trace(grown)
+    assert math.hypot(tracker.pose.x_m - 5.05, tracker.pose.y_m - 0.1) < 0.03
+
+
+def test_an_outlying_match_is_gated_out():
+    tracker = PoseTracker(Pose2D(0.0, 0.0, 0.0), model=OdometryModel())
+    tracker.predict(Pose2D(1.0, 0.0, 0.0))
+    assert not tracker.correct(Pose2D(1.0, 0.0, 0.0), Pose2D(1.8, 0.6, 0.3), np.diag([1e-4, 1e-4, 1e-4]))
+    assert tracker.pose == Pose2D(1.0, 0.0, 0.0)
+
+
+def test_matching_and_fusion_keep_a_drifting_robot_on_track():
+    """Drive a square loop with drifting odometry; correct every 0.5 m from a simulated camera scan."""
+    rng = np.random.default_rng(5)
+    field = likelihood_field(box_outlines(), RES)
+    matcher = ScanMatcher()
+    truth, odom = Pose2D(2.0, 1.0, 0.0), Pose2D(2.0, 1.0, 0.0)
+    tracker = PoseTracker(odom)
+    legs = [(0.0, 5.0)] + [(math.pi / 2, 3.0), (math.pi / 2, 5.0)] * 3 + [(math.pi / 2, 3.0)]  # twice round
+    for turn, length in legs:
+        for i, step in enumerate([0.5] * int(length / 0.5)):
+            t = turn if i == 0 else 0.0
+            truth = truth.moved(step, t)
+            odom = odom.moved(step * 1.03, t * 1.03 + math.radians(1.5) * step)  # a biased base
+            tracker.predict(odom)
+            result = matcher.match(camera_scan(truth, rng), tracker.pose, field, tracker.covariance)
+            if result.accepted:
+                tracker.correct(odom, result.pose, result.covariance)
+    assert math.hypot(odom.x_m - truth.x_m, odom.y_m - truth.y_m) > 0.5
+    assert math.hypot(tracker.pose.x_m - truth.x_m, tracker.pose.y_m - truth.y_m) < 0.08
+
+
+def test_backing_off_is_not_a_half_turn():
+    tracker = PoseTracker(Pose2D(1.0, 1.0, 0.0))
+    tracker.predict(Pose2D(0.85, 1.0, 0.0))  # 0.15 m straight back
+    assert math.degrees(math.sqrt(tracker.covariance[2, 2])) < 1.0

@@ -1,0 +1,103 @@
+"""The navigator driving a real simulator subprocess over Zenoh, in a world built for it: a U-shaped
+obstacle, a closed pen, a solid block and a bar too low for stereo to map (only a stall finds it)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from conftest import running_agent
+from offboard.bench.navigation import true_floor_map
+from offboard.navigation.grid_planner import path_length_m, shortest_path
+from offboard.navigation.navigator import Navigator, retry_busy
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.perception.voxel_grid import VoxelGrid
+from onboard.sim.world import load_world
+
+pytestmark = pytest.mark.integration
+
+WORLD = """
+name = "navigation-test"
+[room]
+size = [8.0, 6.0, 2.5]
+{obstacles}
+[target]
+size = [0.23, 0.23, 0.23]
+position = [1.4, 4.4, 0.8]
+[robot]
+start = [1.5, 2.0]
+heading_deg = 0
+"""
+OBSTACLES = {  # name: (kind, min, max)
+    "u-south": ("crate", (3.0, 1.0, 0.0), (4.5, 1.2, 0.8)),
+    "u-north": ("crate", (3.0, 2.8, 0.0), (4.5, 3.0, 0.8)),
+    "u-back": ("crate", (4.3, 1.2, 0.0), (4.5, 2.8, 0.8)),
+    "pen-south": ("table", (5.8, 3.8, 0.0), (7.2, 3.9, 0.6)),
+    "pen-north": ("table", (5.8, 5.1, 0.0), (7.2, 5.2, 0.6)),
+    "pen-west": ("table", (5.8, 3.9, 0.0), (5.9, 5.1, 0.6)),
+    "pen-east": ("table", (7.1, 3.9, 0.0), (7.2, 5.1, 0.6)),
+    "block": ("cabinet", (1.0, 4.0, 0.0), (1.8, 4.8, 0.8)),
+    "low-bar": ("box", (4.0, 3.9, 0.0), (4.1, 4.7, 0.06)),  # under the map's floor clearance
+}
+
+
+@pytest.fixture(scope="module")
+def world_path(tmp_path_factory):
+    blocks = "\n".join(f'[[obstacle]]\nname = "{name}"\nkind = "{kind}"\nmin = {list(lo)}\nmax = {list(hi)}'
+                       for name, (kind, lo, hi) in OBSTACLES.items())
+    path = tmp_path_factory.mktemp("world") / "navigation-test.toml"
+    path.write_text(WORLD.format(obstacles=blocks))
+    return path
+
+
+@pytest.fixture(scope="module")
+def agent(world_path, tmp_path_factory):
+    with running_agent(tmp_path_factory.mktemp("agent"), "--world", str(world_path)) as pair:
+        yield pair
+
+
+def navigate(robot, start, goal):
+    """Put the robot at ``start`` (it is told), give it a fresh map, look round, drive to ``goal``."""
+    retry_busy(robot.sim_teleport, *start)
+    navigator = Navigator(robot, OccupancyGrid(VoxelGrid((8.0, 6.0, 2.5), 0.05)))
+    navigator.survey()
+    return navigator.go_to(goal)
+
+
+def true_shortest(world_path, start, goal):
+    world = load_world(world_path)
+    boxes = [(b.min_m, b.max_m) for b in world.floor_obstacles()]
+    return path_length_m(shortest_path(true_floor_map(world.room.size_m[:2], boxes, 0.26), start, goal))
+
+
+def test_reaches_a_goal_behind_the_u_without_touching_anything(agent, world_path):
+    _, robot = agent
+    result = navigate(robot, (1.5, 2.0, 0.0), (5.5, 2.0))
+    truth = robot.sim_truth()
+    assert result.status == "reached" and result.stalls == 0  # the simulator reports every contact
+    assert math.dist((truth.x_m, truth.y_m), (5.5, 2.0)) < 0.2
+    assert result.distance_m < 1.3 * true_shortest(world_path, (1.5, 2.0), (5.5, 2.0))
+    assert result.robot_time_s > 0.0 and result.matches_accepted > 0
+
+
+def test_a_goal_inside_an_obstacle_is_unreachable_in_bounded_time(agent):
+    _, robot = agent
+    result = navigate(robot, (1.5, 2.0, 90.0), (1.4, 4.2))
+    assert result.status == "unreachable" and "blocked" in result.reason
+    assert result.steps <= 12 and result.stalls == 0
+
+
+def test_an_enclosed_goal_is_unreachable(agent):
+    _, robot = agent
+    result = navigate(robot, (4.8, 4.4, 0.0), (6.5, 4.5))
+    assert result.status == "unreachable" and "no route" in result.reason
+    assert result.steps <= 12 and result.stalls == 0
+
+
+def test_a_stall_marks_the_unseen_obstacle_and_the_robot_goes_round(agent):
+    _, robot = agent
+    result = navigate(robot, (3.2, 4.3, 0.0), (5.0, 4.3))
+    truth = robot.sim_truth()
+    assert 1 <= result.stalls < 4
+    assert result.status == "reached" and math.dist((truth.x_m, truth.y_m), (5.0, 4.3)) < 0.2

@@ -1,0 +1,126 @@
+"""The target belief (eq. 1, 2, 4) and the detection function of a look taken."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from offboard.planning.belief import TargetBelief
+from offboard.perception.detectability import DetectabilityTable, facing_angle_deg
+from offboard.planning.detection_function import look_footprint, visible_depth
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.perception.voxel_grid import VoxelGrid
+from shared.geometry import HeadMount, Intrinsics, Pose2D
+
+GRID = VoxelGrid((2.0, 1.0, 0.5), 0.1)  # 20 × 10 × 5 cubes: small enough for property tests
+K = Intrinsics.from_fov(640, 480, 66.0)
+
+
+def _random_look(rng, belief):
+    n = belief.grid.num_cubes
+    idx = rng.choice(n, size=rng.integers(0, n), replace=False)
+    return idx, rng.uniform(0, 1, (idx.size, belief.facing_sectors))
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), sectors=st.sampled_from([1, 4, 8]), looks=st.integers(1, 6),
+       outside=st.floats(0.0, 0.5))
+def test_total_mass_stays_one_after_any_sequence_of_updates(seed, sectors, looks, outside):
+    rng = np.random.default_rng(seed)
+    belief = TargetBelief(GRID, facing_sectors=sectors, prob_outside=outside, coarse_factor=3)
+    for _ in range(looks):
+        belief.update_after_miss(*_random_look(rng, belief))
+        assert belief.target_prob.sum() + belief.prob_outside == pytest.approx(1.0, abs=1e-5)
+        assert belief.coarse_mass().sum() == pytest.approx(belief.prob_inside, abs=1e-5)
+        assert 0.0 <= belief.success_prob <= 1.0
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_a_look_that_can_see_nothing_changes_nothing(seed):
+    rng = np.random.default_rng(seed)
+    belief = TargetBelief(GRID, facing_sectors=4)
+    belief.update_after_miss(*_random_look(rng, belief))
+    before = belief.target_prob.copy()
+    idx = rng.choice(GRID.num_cubes, 30, replace=False)
+    assert belief.update_after_miss(idx, np.zeros((30, 4))) == 0.0
+    np.testing.assert_allclose(belief.target_prob, before, rtol=1e-6)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), b=st.floats(0.05, 0.99))
+def test_eq4_seen_cubes_lose_and_unseen_cubes_and_outside_gain(seed, b):
+    rng = np.random.default_rng(seed)
+    belief = TargetBelief(GRID, facing_sectors=1, prob_outside=0.1)
+    before, outside = belief.target_prob.copy(), belief.prob_outside
+    idx = rng.choice(GRID.num_cubes, 50, replace=False)
+    found = belief.update_after_miss(idx, np.full((50, 1), b))
+    after = belief.target_prob.reshape(-1)
+    seen = np.zeros(GRID.num_cubes, bool)
+    seen[idx] = True
+    assert (after[seen] < before.reshape(-1)[seen]).all() and (after[~seen] > before.reshape(-1)[~seen]).all()
+    assert belief.prob_outside > outside
+    # eq. 4 exactly: p' = p (1 - b) / (p_out + Σ p (1 - b)); eq. 1: found = Σ p b
+    assert found == pytest.approx(before.reshape(-1)[seen].sum() * b, rel=1e-5)
+    expected = before.reshape(-1)[seen] * (1 - b) / (1 - found)
+    np.testing.assert_allclose(after[seen], expected, rtol=1e-4)
+
+
+def test_eq2_success_probability_accumulates():
+    belief = TargetBelief(GRID, facing_sectors=1, prob_outside=0.0)
+    idx = np.arange(GRID.num_cubes // 2)
+    p1 = belief.update_after_miss(idx, np.full((idx.size, 1), 0.5))
+    p2 = belief.update_after_miss(idx, np.full((idx.size, 1), 0.5))
+    assert p1 == pytest.approx(0.25) and belief.success_prob == pytest.approx(p1 + (1 - p1) * p2)
+
+
+def test_a_second_look_from_the_same_side_is_worth_less_than_one_from_a_new_side():
+    belief = TargetBelief(GRID, facing_sectors=8, prob_outside=0.0)
+    cube = np.array([GRID.num_cubes // 2])
+    table = DetectabilityTable.nominal()
+    az = belief.facing_azimuths_rad
+
+    def b_from(view_az):
+        return table.lookup(np.full(8, 1.0), np.zeros(8), facing_angle_deg(view_az, az))[None, :]
+    first = belief.update_after_miss(cube, b_from(0.0))
+    same = TargetBelief(GRID, facing_sectors=8, prob_outside=0.0)
+    same.update_after_miss(cube, b_from(0.0))
+    again_same = same.update_after_miss(cube, b_from(0.0))
+    new_side = belief.update_after_miss(cube, b_from(math.pi))
+    assert first > 0 and new_side > again_same
+
+
+def test_concentrate_puts_the_mass_at_a_detection():
+    belief = TargetBelief(GRID)
+    belief.concentrate(np.array([1.0, 0.5, 0.25]), sigma_m=0.1)
+    p = belief.target_prob
+    assert belief.prob_outside == 0.0 and p.sum() == pytest.approx(1.0)
+    assert tuple(np.unravel_index(p.argmax(), p.shape)) in {(i, j, k) for i in (9, 10) for j in (4, 5) for k in (1, 2)}
+
+
+ROOM = VoxelGrid((4.0, 3.0, 2.5), 0.05)
+MOUNT = HeadMount()
+
+
+def test_footprint_is_the_visible_part_of_the_view_inside_the_detector_range():
+    occ = OccupancyGrid(ROOM)
+    cam = MOUNT.camera_in_world(Pose2D(0.5, 1.5, 0.0), 0.0, 0.0)
+    wall = np.full((480, 640), K.fx_px * 0.12 / 1.5, np.float32)  # something 1.5 m ahead, everywhere
+    occ.integrate_disparity(wall, K, 0.12, cam)
+    table = DetectabilityTable.nominal(near_m=0.4, far_m=3.0)
+    depth = visible_depth(wall, occ, cam, K, 0.12, 16, 3.5)
+    toward_camera = np.array([math.pi])  # the face's normal points back along -x, at the camera
+    fp = look_footprint(ROOM, cam, K, depth, 16, table, toward_camera, behind_surface_m=0.1)
+    centers = ROOM.centers().reshape(-1, 3)[fp.cube_index]
+    dx, dy = (centers[:, :2] - cam.translation[:2]).T
+    assert fp.cube_index.size > 1000 and (fp.detection_prob > 0).mean() > 0.8
+    assert dx.min() >= 0.4 - 0.05 and dx.max() <= 1.5 + 0.1 + 0.05  # in range, nothing behind the surface
+    assert np.abs(np.arctan2(dy, dx)).max() <= math.radians(33.1)  # centres inside the image
+    open_depth = visible_depth(None, OccupancyGrid(ROOM), cam, K, 0.12, 16, 3.5)
+    far_fp = look_footprint(ROOM, cam, K, open_depth, 16, table, toward_camera, 0.1)
+    assert far_fp.cube_index.size > 2 * fp.cube_index.size  # with nothing in the way it sees farther
+    # facing: a face pointing away from the camera (azimuth 0 = +x, the camera looks along +x) is never seen
+    back = look_footprint(ROOM, cam, K, depth, 16, table, np.array([0.0, math.pi]), 0.1)
+    assert (back.detection_prob[:, 0] == 0).all() and (back.detection_prob[:, 1] > 0).mean() > 0.8

@@ -1,0 +1,133 @@
+"""The SYT planner on small hand-built maps whose right answers are known."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from offboard.planning.belief import TargetBelief
+from offboard.perception.detectability import DetectabilityTable
+from offboard.planning.detection_function import look_footprint, visible_depth
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.planning.planner import PlannerConfig, SearchPlanner, candidate_positions
+from offboard.planning.priors import HintBox, hints
+from offboard.planning.time_model import TimeModel
+from offboard.perception.voxel_grid import VoxelGrid
+from shared.geometry import HeadMount, Intrinsics, Pose2D
+from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
+
+K = Intrinsics.from_fov(640, 480, 66.0)
+MOUNT = HeadMount()
+ROOM = VoxelGrid((6.0, 4.0, 2.5), 0.05)
+TIME = TimeModel(BaseLimits(), PanTiltLimits(), CameraTiming())
+# Each box sits at head height in the middle of a grid square: the four candidates around it see it
+# from 0.7 m, no other candidate is within the detector's 1.5 m.
+A_BOX = HintBox((4.4, 2.4, 1.1), (4.6, 2.6, 1.3), 0.6)  # far from the start: nearest viewpoint 3.8 m
+B_BOX = HintBox((2.4, 1.4, 1.1), (2.6, 1.6, 1.3), 0.3)  # nearer: 1.6 m
+
+
+def _planner(cost: int, boxes=(A_BOX, B_BOX), table=None, **config) -> SearchPlanner:
+    belief = TargetBelief(ROOM, facing_sectors=1, prob_outside=0.0)
+    belief.set_prior(hints(ROOM, boxes), prob_outside=0.0)
+    return SearchPlanner(belief, PlannerConfig(cost_function=cost, **config),
+                         table or DetectabilityTable.nominal(near_m=0.3, far_m=1.5, max_facing_deg=90), TIME, K, MOUNT)
+
+
+def _paths(planner: SearchPlanner, pose: Pose2D) -> np.ndarray:
+    return np.hypot(planner.positions[:, 0] - pose.x_m, planner.positions[:, 1] - pose.y_m)
+
+
+START = Pose2D(0.5, 0.5, 0.0)  # nothing within reach of the start: the robot must move
+
+
+@pytest.mark.parametrize("cost,near", [(1, A_BOX), (2, A_BOX), (3, B_BOX), (4, A_BOX)])
+def test_each_cost_function_picks_what_its_equation_says(cost, near):
+    # eq. 10: 0.6 > 0.3; eq. 11: 0.3 / 1.6 > 0.6 / 3.8; eq. 12: 0.6 (1 + 1/3.8) > 0.3 (1 + 1/1.6);
+    # eq. 9: the single best action sees A's larger mass.
+    planner = _planner(cost)
+    d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))
+    assert d.kind == "move"
+    box_center = (np.array(near.min[:2]) + np.array(near.max[:2])) / 2
+    assert np.hypot(*(np.array(d.position_m) - box_center)) < 1.0, d.reason
+    assert d.detection_prob > 0.1
+
+
+def test_the_paper_lab_has_544_actions():
+    belief = TargetBelief(VoxelGrid((9.0, 5.0, 2.5), 0.05))
+    planner = SearchPlanner(belief, PlannerConfig(), DetectabilityTable.nominal(), TIME, K, MOUNT)
+    assert len(candidate_positions((9.0, 5.0, 2.5), 1.0)) == 32 and len(planner.settings) == 17
+    assert planner.action_count == 544
+
+
+def test_a_hinted_region_is_looked_at_first():
+    planner = _planner(3, boxes=(HintBox((1.8, 2.6, 0.9), (2.2, 3.0, 1.2), 0.9),))
+    pose = Pose2D(2.0, 1.5, 0.0)  # the hint is 1.3 m to the robot's left (+y)
+    d = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose))
+    assert d.kind == "look" and abs(math.degrees(d.azimuth_rad) - 90.0) <= 25.0
+
+
+def _wall_between(occ: OccupancyGrid) -> None:
+    """Observe a wall at x = 1.5 m across the room, seen from x = 0.5."""
+    cam = MOUNT.camera_in_world(Pose2D(0.5, 2.0, 0.0), 0.0, 0.0)
+    occ.integrate_disparity(np.full((480, 640), K.fx_px * MOUNT.baseline_m / 1.0, np.float32), K, MOUNT.baseline_m, cam)
+
+
+def test_cubes_behind_a_wall_are_worth_nothing():
+    box = (HintBox((2.0, 1.9, 1.0), (2.2, 2.1, 1.2), 0.95),)
+    open_room, walled = OccupancyGrid(ROOM), OccupancyGrid(ROOM)
+    for _ in range(3):
+        _wall_between(walled)
+    pose = Pose2D(0.8, 2.0, 0.0)
+    planner = _planner(3, boxes=box)
+    seen = planner.decide(pose, 0.0, 0.0, 0.0, open_room, _paths(planner, pose))
+    hidden = planner.decide(pose, 0.0, 0.0, 0.0, walled, _paths(planner, pose))
+    assert seen.values.detection_prob[-1].max() > 0.3
+    assert hidden.values.detection_prob[-1].max() < 0.02 and hidden.values.covering_prob[-1] < 0.05
+
+
+def test_a_place_nothing_has_looked_at_keeps_its_probability():
+    planner = _planner(3, boxes=(), table=DetectabilityTable.nominal())
+    belief = planner.belief
+    occ = OccupancyGrid(ROOM)
+    corner = ROOM.index_of(np.array([[5.8, 3.8, 0.2]]))[0]
+    middle = ROOM.index_of(np.array([[3.0, 2.0, 1.2]]))[0]
+    before_corner = belief.target_prob[tuple(corner)]
+    for azimuth in (0.0, 1.5, 3.0):  # three looks from the west side, none reaching the far corner
+        cam = MOUNT.camera_in_world(Pose2D(1.0, 2.0, azimuth), 0.0, 0.0)
+        depth = visible_depth(None, occ, cam, K, MOUNT.baseline_m, 16, 3.5)
+        fp = look_footprint(ROOM, cam, K, depth, 16, planner.table, belief.facing_azimuths_rad, 0.1)
+        assert corner @ [ROOM.shape[1] * ROOM.shape[2], ROOM.shape[2], 1] not in set(fp.cube_index)
+        belief.update_after_miss(fp.cube_index, fp.detection_prob)
+    assert belief.target_prob[tuple(corner)] > before_corner  # it keeps (and gains) probability
+    assert belief.target_prob[tuple(middle)] < before_corner  # what was seen lost
+
+
+def test_the_robot_moves_once_the_covering_probability_drops_below_the_threshold():
+    planner = _planner(3, boxes=(HintBox((1.8, 2.6, 0.9), (2.2, 3.0, 1.2), 0.5),), move_threshold=0.3)
+    pose = Pose2D(2.0, 1.5, 0.0)
+    d = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose))
+    assert d.kind == "look" and d.covering_here >= 0.3
+    higher = _planner(3, boxes=(HintBox((1.8, 2.6, 0.9), (2.2, 3.0, 1.2), 0.5),), move_threshold=0.95)
+    d2 = higher.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(higher, pose))
+    assert d2.kind == "move" and "Θ_move" in d2.reason
+
+
+def test_stops_when_the_budget_is_spent_or_nothing_is_left():
+    planner = _planner(3, budget_s=10.0)
+    assert planner.decide(START, 0.0, 0.0, 9.9, OccupancyGrid(ROOM), _paths(planner, START)).status == "budget"
+    empty = _planner(3)
+    empty.belief.set_prior(np.zeros(ROOM.shape), prob_outside=0.0)  # all the mass outside the room
+    d = empty.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(empty, START))
+    assert d.kind == "stop" and d.status == "exhausted"
+
+
+def test_unreachable_positions_are_never_chosen():
+    planner = _planner(2)
+    paths = _paths(planner, START)
+    a_center = np.array([4.5, 2.5])
+    near_a = np.hypot(*(planner.positions - a_center).T) < 1.5
+    paths[near_a] = np.inf
+    d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), paths)
+    assert d.kind == "move" and np.hypot(*(np.array(d.position_m) - a_center)) >= 1.5

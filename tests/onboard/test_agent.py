@@ -1,0 +1,269 @@
+"""The onboard agent as a real subprocess, driven through a real Zenoh session on loopback."""
+
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+
+import msgpack
+import numpy as np
+import pytest
+import zenoh
+
+from conftest import client_transport, running_agent
+from offboard.robot.robot_client import CommandError
+from shared import messages as m
+from shared.codec import decode, encode
+from shared.keys import RobotKeys
+
+pytestmark = pytest.mark.integration
+
+
+def test_info_describes_the_robot(sim_agent):
+    _, robot = sim_agent
+    info = robot.info()
+    assert info.backend == "sim" and info.robot_id == "syt"
+    assert (info.pantilt.pan_max_deg, info.pantilt.tilt_min_deg, info.pantilt.tilt_max_deg) == (159.0, -47.0, 31.0)
+    assert info.intrinsics.width_px == 640 and info.mount.baseline_m == pytest.approx(0.12)
+
+
+def test_move_look_capture(sim_agent):
+    _, robot = sim_agent
+    before = robot.state()
+    result = robot.move(turn_deg=0.0, distance_m=0.5)
+    assert result.status == "done" and result.distance_m == pytest.approx(0.5, abs=1e-6)
+    moved = math.hypot(result.pose.x_m - before.pose.x_m, result.pose.y_m - before.pose.y_m)
+    assert moved == pytest.approx(0.5, abs=0.05)  # odometry: a few percent of noise
+    assert result.robot_time_s > before.robot_time_s + result.duration_s * 0.99
+    look = robot.look(30.0, 10.0)
+    assert (look.pan_deg, look.tilt_deg) == pytest.approx((30.0, 10.0))
+    assert look.duration_s == pytest.approx(robot.info().pantilt.slew_time_s(30.0, 10.0), rel=0.05)
+    capture = robot.capture()
+    assert capture.left.shape == capture.right.shape == (480, 640, 3)
+    assert (capture.pan_deg, capture.tilt_deg) == pytest.approx((30.0, 10.0))
+    assert capture.pose == result.pose and capture.robot_time_s >= look.robot_time_s
+    assert not np.array_equal(capture.left, capture.right)  # two viewpoints
+    png = robot.capture("png")
+    assert np.array_equal(png.left, capture.left)  # lossless either way
+    robot.look(0.0, 0.0)
+
+
+def test_waypoint_and_stop(sim_agent):
+    _, robot = sim_agent
+    start = robot.state().pose
+    goal = (start.x_m + 0.5, start.y_m + 0.5)
+    result = robot.move_to(*goal)
+    assert result.status == "done"
+    assert math.hypot(result.pose.x_m - goal[0], result.pose.y_m - goal[1]) < 0.02  # odometry reaches it
+    stop = robot.stop()
+    assert stop.pose == robot.state().pose and not robot.state().base_moving
+
+
+@pytest.mark.parametrize("call,code,words", [
+    (lambda r: r.look(170.0, 0.0), "limit", "pan limit"),
+    (lambda r: r.look(0.0, -60.0), "limit", "tilt limit"),
+    (lambda r: r.move(distance_m=50.0), "limit", "max_distance_m"),
+    (lambda r: r.move(distance_m=1.0, speed_m_s=5.0), "limit", "max_speed_m_s"),
+])
+def test_out_of_range_commands_are_refused_naming_the_limit(sim_agent, call, code, words):
+    _, robot = sim_agent
+    with pytest.raises(CommandError) as err:
+        call(robot)
+    assert err.value.code == code and words in str(err.value)
+    assert robot.state().robot_time_s >= 0.0  # still serving
+
+
+def _raw_get(session: zenoh.Session, key: str, payload: bytes | None):
+    replies = list(session.get(key, payload=payload, timeout=5.0))
+    assert len(replies) == 1
+    return replies[0]
+
+
+@pytest.mark.parametrize("payload,field", [
+    (b"\x00garbage\xff", ""),
+    (None, ""),
+    (msgpack.packb({"schema": 1, "type": "LookCommand", "body": {"command_id": "k1", "pan_deg": float("nan"), "tilt_deg": 0.0}}), "pan_deg"),
+    (msgpack.packb({"schema": 1, "type": "LookCommand", "body": {"command_id": "k2", "pan_deg": 1.0, "tilt_deg": 0.0, "zoom": 3}}), "zoom"),
+    (encode(m.StopCommand("k3")), "type"),  # right codec, wrong command for this key
+])
+def test_malformed_payloads_get_a_protocol_error_and_the_agent_lives_on(sim_agent, payload, field):
+    agent, robot = sim_agent
+    with client_transport(agent).open() as session:
+        reply = _raw_get(session, RobotKeys("syt").look, payload)
+        assert reply.ok is None
+        error = decode(reply.err.payload.to_bytes(), m.ErrorReply)
+    assert error.code == "protocol" and field in error.message
+    if payload and b"k1" in payload:
+        assert error.command_id == "k1"  # the id is echoed even when the body is bad
+    assert robot.state() is not None and agent.process.poll() is None
+
+
+def _drain(sub) -> list:
+    samples = []
+    while (s := sub.try_recv()) is not None:
+        samples.append(s)
+    return samples
+
+
+def test_publications_carry_increasing_sequence_numbers(sim_agent):
+    agent, _ = sim_agent
+    keys = RobotKeys("syt")
+    with client_transport(agent).open() as session:
+        odometry = session.declare_subscriber(keys.odometry, zenoh.handlers.FifoChannel(64))
+        pantilt = session.declare_subscriber(keys.pantilt, zenoh.handlers.FifoChannel(64))
+        time.sleep(1.0)
+        odo = [decode(s.payload.to_bytes(), m.Odometry) for s in _drain(odometry)]
+        head = [decode(s.payload.to_bytes(), m.PanTiltState) for s in _drain(pantilt)]
+    assert 5 <= len(odo) <= 15 and 5 <= len(head) <= 15  # 10 Hz for a second
+    assert [o.seq for o in odo] == sorted(o.seq for o in odo) and len({o.seq for o in odo}) == len(odo)
+
+
+def test_driving_into_a_wall_stalls_at_the_wall(tmp_path, box_world):
+    # the box room is 6 m long in x; start 1.5 m from the east wall, heading east
+    with running_agent(tmp_path, "--world", str(box_world), "--start", "4.5,1.0,0") as (_, robot):
+        result = robot.move(distance_m=3.0)
+        truth = robot.sim_truth()
+        assert result.status == "stalled" and robot.state().stalled
+        assert truth.x_m == pytest.approx(6.0 - robot.info().base.radius_m, abs=0.005)
+        assert result.distance_m == pytest.approx(1.5 - robot.info().base.radius_m, abs=0.005)
+        assert robot.move(distance_m=-0.5).status == "done"  # backing off works, and clears the stall
+        assert not robot.state().stalled
+
+
+_LOST_PLANNER = textwrap.dedent("""
+    import sys, threading
+    from offboard.robot.robot_client import RobotClient
+    from shared.transport import TransportConfig
+    session = TransportConfig(connect=(sys.argv[1],), multicast_scouting=False).open()
+    robot = RobotClient(session, "syt")
+    robot.wait_for_robot(30.0)
+    threading.Thread(target=robot.move, kwargs={"distance_m": 4.0, "speed_m_s": 0.3}, daemon=True).start()
+    print("moving", flush=True)
+    threading.Event().wait()
+""")
+
+
+def _wait_until(predicate, timeout_s: float) -> float:
+    start = time.monotonic()
+    while time.monotonic() - start < timeout_s:
+        if predicate():
+            return time.monotonic() - start
+        time.sleep(0.01)
+    raise AssertionError("condition not reached in time")
+
+
+def test_driving_into_an_obstacle_stalls_at_its_side(tmp_path, box_world):
+    with running_agent(tmp_path, "--world", str(box_world), "--start", "3.0,1.0,90") as (_, robot):
+        assert robot.move(distance_m=3.0).status == "stalled"
+        assert robot.sim_truth().y_m == pytest.approx(2.5 - robot.info().base.radius_m, abs=0.005)
+
+
+def test_teleport_places_the_robot_and_refuses_walls(sim_agent):
+    _, robot = sim_agent
+    pose = robot.sim_teleport(2.0, 1.0, 45.0)
+    assert (pose.x_m, pose.y_m, pose.heading_deg) == pytest.approx((2.0, 1.0, 45.0))
+    assert robot.state().pose == pose  # odometry is reset with the truth
+    with pytest.raises(CommandError, match="cannot stand"):
+        robot.sim_teleport(0.1, 0.1, 0.0)
+
+
+def test_reset_starts_a_new_run_in_the_same_agent(sim_agent):
+    _, robot = sim_agent
+    home = (1.7, 4.5, 0.75, -90.0)  # paper-lab's own placement
+    view = (4.5, 2.0, 90.0)  # facing the centre table's north side from the south
+    pose = robot.sim_reset(view, home, seed=5)
+    assert (pose.x_m, pose.y_m, pose.heading_deg) == pytest.approx(view)
+    assert robot.state().pose == pose and (robot.state().pan_deg, robot.state().tilt_deg) == (0.0, 0.0)
+    without = robot.capture().left
+    robot.sim_reset(view, (4.5, 2.5, 0.75, -90.0), seed=5)  # on the centre table, facing the robot
+    assert np.abs(robot.capture().left.astype(int) - without).max() > 50  # the target is in view now
+    driven = []
+    for _ in range(2):  # same seed, same noise: the run repeats exactly
+        robot.sim_reset(view, home, seed=5)
+        assert np.array_equal(robot.capture().left, without)
+        robot.move(turn_deg=-90.0, distance_m=1.0)
+        driven.append(robot.state().pose)
+    assert driven[0] == driven[1] and driven[0] != robot.sim_truth()
+    with pytest.raises(CommandError, match="overlaps obstacle"):
+        robot.sim_reset(view, (4.5, 2.5, 0.5, 0.0), seed=0)  # inside the table
+    assert robot.sim_truth() != pose  # a refused reset changes nothing
+
+
+PACED = ("--start", "0.5,1.0,0", "--realtime")
+
+
+def test_the_base_stops_when_the_planner_dies_mid_move(tmp_path, box_world):
+    with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):
+        planner = subprocess.Popen([sys.executable, "-c", _LOST_PLANNER, agent.endpoint],
+                                   stdout=subprocess.PIPE, text=True)
+        assert planner.stdout.readline().strip() == "moving"
+        _wait_until(lambda: robot.state().base_moving, 5.0)
+        time.sleep(0.5)
+        planner.kill()
+        planner.wait()
+        stopped_after = _wait_until(lambda: not robot.state().base_moving, 3.0)
+        assert stopped_after < 1.0
+        travelled = robot.sim_truth().x_m - 0.5
+        assert 0.0 < travelled < 1.5  # far short of the 4 m commanded
+        time.sleep(0.5)
+        assert robot.sim_truth().x_m - 0.5 == pytest.approx(travelled, abs=1e-6)  # and stays stopped
+    assert "planner gone" in (tmp_path / "onboard.log").read_text()
+
+
+def test_the_watchdog_stops_a_silent_planner(tmp_path, box_world):
+    with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):
+        robot.close()  # from here on nobody sends heartbeats or holds a planner token
+        keys = RobotKeys("syt")
+        with client_transport(agent).open() as session:
+            odometry = session.declare_subscriber(keys.odometry, zenoh.handlers.RingChannel(1))
+            session.get(keys.move, payload=encode(m.MoveCommand("silent", distance_m=4.0, speed_m_s=0.3)), timeout=30.0)
+            time.sleep(2.5)  # watchdog is 1 s; publications do not count as planner contact
+            last = decode(odometry.recv().payload.to_bytes(), m.Odometry)
+            assert not last.moving
+            assert 0.0 < last.pose.x_m - 0.5 < 0.6
+    assert "watchdog: no word from the planner" in (tmp_path / "onboard.log").read_text()
+
+
+def test_a_second_motion_while_moving_is_refused_and_stop_interrupts(tmp_path, box_world):
+    with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):
+        results = []
+        mover = threading.Thread(target=lambda: results.append(robot.move(distance_m=4.0, speed_m_s=0.3)))
+        mover.start()
+        _wait_until(lambda: robot.state().base_moving, 5.0)
+        with pytest.raises(CommandError) as err:
+            robot.move(distance_m=1.0)
+        assert err.value.code == "busy"
+        robot.stop()
+        mover.join(timeout=5.0)
+        assert results and results[0].status == "stopped" and results[0].distance_m < 1.0
+
+
+def test_sigterm_stops_the_base_and_exits_cleanly(tmp_path, box_world):
+    with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):
+        threading.Thread(target=lambda: _ignore(robot.move, distance_m=4.0), daemon=True).start()
+        _wait_until(lambda: robot.state().base_moving, 5.0)
+        agent.process.send_signal(signal.SIGTERM)
+        assert agent.process.wait(timeout=10) == 0
+        _wait_until(lambda: not any(r.ok for r in robot.session.liveliness().get(robot.keys.agent_alive, timeout=0.3)), 5.0)
+    assert "agent stopped; base stopped" in (tmp_path / "onboard.log").read_text()
+
+
+def _ignore(fn, **kwargs):
+    try:
+        fn(**kwargs)
+    except Exception:
+        pass
+
+
+def test_a_command_right_after_a_motion_reply_is_not_refused_as_busy(sim_agent):
+    _, robot = sim_agent
+    for _ in range(5):  # the base is free by the time its reply arrives
+        robot.move(turn_deg=10.0)
+        robot.move(turn_deg=-10.0)
+        robot.look(5.0, 0.0)
+        robot.look(0.0, 0.0)
