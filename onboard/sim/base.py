@@ -72,6 +72,7 @@ class SimBase:
         self._turn_rate = 0.0
         self._moving = False
         self._stalled = False
+        self._velocity_errors = (1.0, 1.0, 0.0)  # odometry errors of the current velocity-controlled motion
         room = world.room.size_m
         self._room_xy = (room[0], room[1])
         self._blockers = np.array([[b.min_m[0], b.min_m[1], b.max_m[0], b.max_m[1]]
@@ -136,6 +137,25 @@ class SimBase:
         dy = np.maximum(np.maximum(b[:, 1] - y_m, y_m - b[:, 3]), 0.0)
         return bool(np.any(dx * dx + dy * dy < r * r))
 
+    def step_velocity(self, speed_m_s: float, turn_rate_rad_s: float, dt_s: float) -> bool:
+        """One physics step under velocity control, for a byte-level emulator that sets wheel speeds:
+        turn, then drive, stopping at contact. Odometry errors are drawn afresh whenever the base
+        starts from rest, as for a move. False if the base touched something (a stall)."""
+        with self._lock:
+            starting = not self._moving
+        if starting:
+            self._velocity_errors = self._draw_odometry_errors()
+        scale_d, scale_t, drift = self._velocity_errors
+        self._rotate(turn_rate_rad_s * dt_s, scale_t)
+        step = speed_m_s * dt_s
+        moved = self._advance_truth(step) if step else 0.0
+        blocked = moved < abs(step)
+        self._advance_odometry(math.copysign(moved, step), scale_d, drift, 0.0 if blocked else speed_m_s)
+        with self._lock:
+            self._moving = speed_m_s != 0.0 or turn_rate_rad_s != 0.0
+            self._turn_rate, self._stalled = turn_rate_rad_s, blocked
+        return not blocked
+
     def _draw_odometry_errors(self) -> tuple[float, float, float]:
         n = self._noise
         return (1.0 + self._rng.normal(0.0, n.distance_frac),
@@ -162,11 +182,16 @@ class SimBase:
             angle, rate = profile.at(t)
             d_angle = sign * (angle - done_angle)
             done_angle = angle
+            self._rotate(d_angle, scale)
             with self._lock:
-                self._truth = Pose2D(self._truth.x_m, self._truth.y_m, wrap_angle(self._truth.heading_rad + d_angle))
-                self._odom = Pose2D(self._odom.x_m, self._odom.y_m, wrap_angle(self._odom.heading_rad + d_angle * scale))
                 self._turn_rate = sign * rate
         return t, "done"
+
+    def _rotate(self, d_angle: float, scale: float) -> None:
+        """Turn the truth by ``d_angle`` and the odometry by ``d_angle * scale``."""
+        with self._lock:
+            self._truth = Pose2D(self._truth.x_m, self._truth.y_m, wrap_angle(self._truth.heading_rad + d_angle))
+            self._odom = Pose2D(self._odom.x_m, self._odom.y_m, wrap_angle(self._odom.heading_rad + d_angle * scale))
 
     def _drive(self, distance_m: float, speed_m_s: float, scale: float, drift_rad_per_m: float,
                cancel: threading.Event) -> tuple[float, str, float]:
