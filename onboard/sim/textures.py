@@ -9,7 +9,9 @@ block matching needs texture on every surface, so even "plain" plaster carries v
 *Pictures* are stretched over one face (the target's front, a poster). Built-in names: ``target``
 (the default target picture: a square, contrast-enhanced crop of scikit-image's cat "chelsea"
 that SIFT matches well; the ``chelsea`` poster is therefore a hard distractor), ``astronaut``,
-``chelsea``, ``coffee``, ``rocket``, ``hubble``. A name ending in .png/.jpg/.jpeg is read from disk relative to the world file; such a
+``chelsea``, ``coffee``, ``rocket``, ``hubble``, and ``chessboard`` (a calibration target: 10 x 7
+black and white squares, so 9 x 6 inner corners, on a white border one square wide; 4:3, so a
+1.2 x 0.9 m poster has 0.1 m squares). A name ending in .png/.jpg/.jpeg is read from disk relative to the world file; such a
 name with no file behind it whose stem is a built-in name (``target.png``) falls back to that
 built-in picture. ``load_picture`` renders nothing, so the detector side can use it cheaply.
 """
@@ -232,6 +234,20 @@ def _target_picture() -> np.ndarray:
     return cv2.cvtColor(lab, cv2.COLOR_LAB2RGB)
 
 
+CHESSBOARD_SQUARES = (10, 7)  # columns, rows of squares; inner corners are one fewer each way
+CHESSBOARD_SQUARE_PX = 64
+
+
+def _chessboard() -> np.ndarray:
+    """Black and white squares inside a white border one square wide (detectors need the border)."""
+    cols, rows = CHESSBOARD_SQUARES
+    y, x = np.mgrid[0 : rows + 2, 0 : cols + 2]
+    inside = (x >= 1) & (x <= cols) & (y >= 1) & (y <= rows)
+    cells = np.where(inside & ((x + y) % 2 == 0), 0, 255).astype(np.uint8)
+    grey = np.kron(cells, np.ones((CHESSBOARD_SQUARE_PX, CHESSBOARD_SQUARE_PX), dtype=np.uint8))
+    return np.repeat(grey[:, :, None], 3, axis=2)
+
+
 _BUILTIN_PICTURES: dict[str, Callable[[], np.ndarray]] = {
     "target": _target_picture,
     "astronaut": skimage.data.astronaut,
@@ -239,6 +255,7 @@ _BUILTIN_PICTURES: dict[str, Callable[[], np.ndarray]] = {
     "coffee": skimage.data.coffee,
     "rocket": skimage.data.rocket,
     "hubble": skimage.data.hubble_deep_field,
+    "chessboard": _chessboard,
 }
 
 
