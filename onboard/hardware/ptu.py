@@ -73,7 +73,7 @@ class PtuLink:
         if self._stale:
             self.flush()
             self._stale = False
-        self._events.extend(self._read_available())  # unprompted events queued since the last command
+        self._events.extend(self._read_available(wait=False))  # unprompted events since the last command
         self._drain_unprompted()
         try:
             self._serial.write(command(name, value))
@@ -115,9 +115,11 @@ class PtuLink:
         elif isinstance(event, Noise):
             log.debug("PTU: %s", event.text)
 
-    def _read_available(self) -> list[Event]:
+    def _read_available(self, wait: bool = True) -> list[Event]:
+        """What has arrived; with ``wait``, the first byte is awaited for up to the read timeout."""
         try:
-            data = self._serial.read(max(1, self._serial.in_waiting))
+            waiting = self._serial.in_waiting
+            data = self._serial.read(max(1, waiting)) if waiting or wait else b""
         except (serial.SerialException, OSError) as exc:
             raise PtuError("read", f"cannot read from {self.port}: {exc}") from exc
         return self._tokenizer.feed(data)
@@ -173,12 +175,16 @@ class PtuPanTilt:
                      for axis, name in (("P", "PR"), ("T", "TR"))}
         self._range = {name: parse_integer(self._link.transact(name), name) for name in ("PN", "PX", "TN", "TX")}
         self.limits = self._intersect(configured)
-        for name, deg in (("PS", configured.pan_speed_deg_s), ("TS", configured.tilt_speed_deg_s),
-                          ("PA", configured.accel_deg_s2), ("TA", configured.accel_deg_s2)):
-            self._link.transact(name, max(1, round(deg_to_positions(deg, self._res[name[0]]))))
+        self._set_slew(configured.pan_speed_deg_s, configured.tilt_speed_deg_s, configured.accel_deg_s2)
         self._state = self._query_positions() + (False,)
         log.info("PTU-D46 on %s: %.4f/%.4f arcsec per position, limits %s", self.config.port,
                  self._res["P"], self._res["T"], self.limits)
+
+    def _set_slew(self, pan_deg_s: float, tilt_deg_s: float, accel_deg_s2: float) -> None:
+        for name, value in (("PS", pan_deg_s), ("TS", tilt_deg_s), ("PA", accel_deg_s2), ("TA", accel_deg_s2)):
+            self._link.transact(name, max(1, round(deg_to_positions(value, self._res[name[0]]))))
+        self.limits = replace(self.limits, pan_speed_deg_s=pan_deg_s, tilt_speed_deg_s=tilt_deg_s,
+                              accel_deg_s2=accel_deg_s2)
 
     def _intersect(self, configured: PanTiltLimits) -> PanTiltLimits:
         r = self._range
@@ -198,15 +204,17 @@ class PtuPanTilt:
         self._halt.clear()
         start = time.monotonic()
         goal = (self._to_positions(pan_rad, "P"), self._to_positions(tilt_rad, "T"))
+        if goal == self._state[:2]:
+            return 0.0  # already there: nothing moves, nothing to settle
         with self._io:
-            self._check_open()
+            self._check_open("look")
             self._link.limit_hits.clear()
             self._link.transact("PP", goal[0])
             self._link.transact("TP", goal[1])
         deadline = start + self.config.move_timeout_s
         while True:
             with self._io:
-                self._check_open()
+                self._check_open("look")
                 positions = self._query_positions()
                 arrived = positions == goal
                 self._state = positions + (not arrived,)
@@ -226,6 +234,12 @@ class PtuPanTilt:
                 raise PtuError("look", f"the head did not reach its goal within {self.config.move_timeout_s:g} s")
             cancel.wait(self.config.poll_s)
         return time.monotonic() - start
+
+    def set_speed(self, pan_deg_s: float, tilt_deg_s: float) -> None:
+        """Slew speeds of the next looks (``PS``/``TS``); ``limits`` follows, for the time model."""
+        with self._io:
+            self._check_open("set_speed")
+            self._set_slew(pan_deg_s, tilt_deg_s, self.limits.accel_deg_s2)
 
     def halt(self) -> None:
         """Stop both axes at once (``H``); safe from any thread."""
@@ -255,9 +269,9 @@ class PtuPanTilt:
 
     # ------------------------------------------------------------------------- helpers
 
-    def _check_open(self) -> None:
+    def _check_open(self, name: str) -> None:
         if self._closed:
-            raise PtuError("look", "the pan-tilt unit was closed")
+            raise PtuError(name, "the pan-tilt unit was closed")
 
     def _to_positions(self, angle_rad: float, axis: str) -> int:
         """The nearest position, kept inside the unit's range (rounding may step just past it)."""

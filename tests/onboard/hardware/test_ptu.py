@@ -55,6 +55,16 @@ def test_look_awaits_arrival(emulator, head):
         assert not reading.moving
 
 
+def test_speed_is_set_on_the_unit_and_a_look_where_it_is_takes_no_time(emulator, head):
+    head.set_speed(30.0, 20.0)
+    assert emulator.machine.pan.speed == round(30.0 / RES_DEG)
+    assert emulator.machine.tilt.speed == round(20.0 / RES_DEG)
+    assert (head.limits.pan_speed_deg_s, head.limits.tilt_speed_deg_s) == (30.0, 20.0)
+    elapsed = head.look(math.radians(15.0), 0.0, threading.Event())
+    assert elapsed == pytest.approx(PanTiltLimits(pan_speed_deg_s=30.0).slew_time_s(15.0, 0.0), abs=0.25)
+    assert head.look(math.radians(15.0), 0.0, threading.Event()) == 0.0
+
+
 def test_halt_from_another_thread_stops_the_look(emulator, head):
     threading.Timer(0.4, head.halt).start()
     elapsed = head.look(math.radians(120.0), 0.0, threading.Event())
