@@ -118,3 +118,12 @@ def test_emulator_serves_a_real_pty_and_exposes_the_head():
             assert math.degrees(emulator.reading().pan_rad) == pytest.approx(500 * 185.1428 / 3600)
         finally:
             os.close(fd)
+
+
+def test_reset_rehomes_deaf_meanwhile_then_answers():
+    machine = terse(ready_machine())
+    machine.receive(b"PP300 ", 1.0)
+    machine.advance(3.0)
+    assert machine.receive(b"R PP ", 3.0) == b""  # re-homing; PP waits for it
+    assert machine.receive(b"V ", 3.2) == b""  # deaf while calibrating
+    assert machine.advance(3.6) == b"*\r\n* 0\r\n"
