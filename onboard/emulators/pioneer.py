@@ -20,6 +20,7 @@ import math
 import select
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -101,6 +102,7 @@ class PioneerServerState:
         self._last_step_s: float | None = None
         self._next_sip_s = 0.0
         self.watchdog_tripped = False
+        self.history: deque[tuple[int, int | str | None]] = deque(maxlen=64)  # recent commands, for tests and logs
 
     # --- packets in ----------------------------------------------------------------------------------
 
@@ -111,6 +113,7 @@ class PioneerServerState:
         except ArcosError as exc:
             log.warning("ignoring command %d: %s", packet.id, exc)
             return []
+        self.history.append((packet.id, arg))
         if not self.open:
             return self._handshake(packet.id, arg, now_s)
         self._last_command_s = now_s
@@ -335,6 +338,11 @@ class PioneerEmulator:
         with self._lock:
             m = self.state.motion
             return self.state.open, self.state.watchdog_tripped, m.speed_mm_s, m.turn_deg_s
+
+    def history(self) -> list[tuple[int, int | str | None]]:
+        """The recent commands received, oldest first."""
+        with self._lock:
+            return list(self.state.history)
 
     def close(self) -> None:
         self._stop.set()

@@ -3,46 +3,18 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
-
 import pytest
 
-from onboard.config import OdometryNoise
 from onboard.emulators.pioneer import PioneerEmulatorConfig, PioneerServerState
 from onboard.hardware import arcos
 from onboard.hardware.arcos import Command, build_packet
-from onboard.sim.base import SimBase
-from onboard.sim.clock import SimClock
-from shared.limits import BaseLimits
-from shared.world import load_world
-
-# A 6 × 4 m room, the robot at (1.5, 1.5) facing +x: the east wall is 4.5 m ahead minus its radius.
-ROOM = """
-name = "emulator-room"
-[room]
-size = [6.0, 4.0, 2.5]
-[target]
-picture = "target"
-size = [0.23, 0.23, 0.23]
-position = [3.0, 3.8, 0.5]
-yaw_deg = -90
-[robot]
-start = [1.5, 1.5]
-heading_deg = 0
-"""
-
-
-def make_base(tmp_path: Path) -> SimBase:
-    path = tmp_path / "room.toml"
-    path.write_text(ROOM)
-    return SimBase(load_world(path), BaseLimits(), SimClock(), OdometryNoise(0.0, 0.0, 0.0))
 
 
 class Robot:
     """The firmware plus an explicit clock; ``send`` returns the parsed replies."""
 
-    def __init__(self, tmp_path: Path, subtype: str = "p3dx"):
-        self.base = make_base(tmp_path)
+    def __init__(self, room_base, subtype: str = "p3dx"):
+        self.base = room_base()
         self.state = PioneerServerState(self.base, PioneerEmulatorConfig(subtype=subtype))
         self.now = 0.0
         self.sips: list[arcos.Sip] = []
@@ -68,8 +40,8 @@ class Robot:
         self.send(Command.ENABLE, 1)
 
 
-def test_no_sip_before_open_then_every_100_ms(tmp_path):
-    robot = Robot(tmp_path)
+def test_no_sip_before_open_then_every_100_ms(room_base):
+    robot = Robot(room_base)
     robot.run(0.5)
     assert robot.sips == []
     assert robot.send(Command.SYNC2) == []  # out of order: no identity before SYNC0 and SYNC1
@@ -79,8 +51,8 @@ def test_no_sip_before_open_then_every_100_ms(tmp_path):
     assert robot.sips[-1].motors_enabled and not robot.sips[-1].moving
 
 
-def test_vel_drives_and_reports_odometry_in_dist_conv_units(tmp_path):
-    robot = Robot(tmp_path)  # p3dx: 0.485 mm per unit
+def test_vel_drives_and_reports_odometry_in_dist_conv_units(room_base):
+    robot = Robot(room_base)  # p3dx: 0.485 mm per unit
     robot.connect()
     robot.send(Command.VEL, 300)
     robot.run(2.0)
@@ -91,8 +63,8 @@ def test_vel_drives_and_reports_odometry_in_dist_conv_units(tmp_path):
     assert true_x_mm == pytest.approx(300 * 2.0 - 0.5 * 300 ** 2 / 300, abs=30)  # ramp at 300 mm/s²
 
 
-def test_head_turns_to_the_heading_and_holds(tmp_path):
-    robot = Robot(tmp_path, subtype="p3dx-sh")
+def test_head_turns_to_the_heading_and_holds(room_base):
+    robot = Robot(room_base, subtype="p3dx-sh")
     robot.connect()
     robot.send(Command.HEAD, 90)
     robot.run(4.0)
@@ -101,16 +73,16 @@ def test_head_turns_to_the_heading_and_holds(tmp_path):
     assert robot.base.true_pose.heading_rad == pytest.approx(math.pi / 2, abs=math.radians(0.5))
 
 
-def test_move_drives_a_distance(tmp_path):
-    robot = Robot(tmp_path, subtype="p3dx-sh")
+def test_move_drives_a_distance(room_base):
+    robot = Robot(room_base, subtype="p3dx-sh")
     robot.connect()
     robot.send(Command.MOVE, 400)
     robot.run(4.0)
     assert robot.sips[-1].x_raw == pytest.approx(400, abs=3) and not robot.sips[-1].moving
 
 
-def test_driving_into_a_wall_sets_the_stall_flags(tmp_path):
-    robot = Robot(tmp_path, subtype="p3dx-sh")
+def test_driving_into_a_wall_sets_the_stall_flags(room_base):
+    robot = Robot(room_base, subtype="p3dx-sh")
     robot.connect()
     robot.send(Command.SETV, 1000)
     robot.send(Command.VEL, 1000)
@@ -122,8 +94,8 @@ def test_driving_into_a_wall_sets_the_stall_flags(tmp_path):
     assert not robot.sips[-1].stalled
 
 
-def test_watchdog_halts_after_2_s_and_resumes_the_last_motion(tmp_path):
-    robot = Robot(tmp_path, subtype="p3dx-sh")
+def test_watchdog_halts_after_2_s_and_resumes_the_last_motion(room_base):
+    robot = Robot(room_base, subtype="p3dx-sh")
     robot.connect()
     robot.send(Command.RVEL, 30)
     robot.run(1.9, keep_alive=False)
@@ -136,8 +108,8 @@ def test_watchdog_halts_after_2_s_and_resumes_the_last_motion(tmp_path):
     assert robot.sips[-1].turn_rate_rad_s == pytest.approx(math.radians(30), rel=0.05)
 
 
-def test_close_ends_the_session_and_stops(tmp_path):
-    robot = Robot(tmp_path, subtype="p3dx-sh")
+def test_close_ends_the_session_and_stops(room_base):
+    robot = Robot(room_base, subtype="p3dx-sh")
     robot.connect()
     robot.send(Command.VEL, 200)
     robot.run(1.0)
@@ -148,8 +120,8 @@ def test_close_ends_the_session_and_stops(tmp_path):
     assert not robot.base.reading().moving
 
 
-def test_vel2_sets_both_wheels(tmp_path):
-    robot = Robot(tmp_path, subtype="p3dx-sh")
+def test_vel2_sets_both_wheels(room_base):
+    robot = Robot(room_base, subtype="p3dx-sh")
     robot.connect()
     robot.send(Command.VEL2, (5 << 8) | 10)  # left 100 mm/s, right 200 mm/s
     robot.run(2.0)

@@ -1,0 +1,195 @@
+"""The Pioneer driver against the byte-level emulator over a real pseudo-terminal, in real time."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+
+import pytest
+import serial
+
+from onboard.emulators.pioneer import PioneerEmulator, PioneerEmulatorConfig, PioneerServerState
+from onboard.hardware import arcos
+from onboard.hardware.arcos import Command, build_packet
+from onboard.hardware.fault import DeviceFault
+from onboard.hardware.pioneer import PioneerBase, PioneerConfig, compose, inverse, probe
+from onboard.sim.base import SimBase
+from shared.geometry import Pose2D
+from shared.limits import BaseLimits
+
+pytestmark = pytest.mark.integration  # real time over a pseudo-terminal: seconds per test
+
+LIMITS = BaseLimits(default_turn_rate_deg_s=120.0, turn_accel_deg_s2=300.0)  # brisk turns keep the tests short
+FAST_LINK = dict(link_timeout_ms=300, reconnect_period_ms=100, sync_reply_timeout_ms=200, stale_session_wait_ms=100)
+
+
+def wait_until(predicate, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+@pytest.fixture
+def sim_base(room_base) -> SimBase:
+    return room_base()
+
+
+@pytest.fixture
+def emulator(sim_base: SimBase) -> Iterator[PioneerEmulator]:
+    with PioneerEmulator(PioneerServerState(sim_base, PioneerEmulatorConfig())) as emu:
+        yield emu
+
+
+@pytest.fixture
+def driver(emulator: PioneerEmulator, sim_base: SimBase) -> Iterator[PioneerBase]:
+    base = PioneerBase(PioneerConfig(port=emulator.path, **FAST_LINK), LIMITS, start=sim_base.true_pose)
+    try:
+        yield base
+    finally:
+        base.close()
+
+
+def test_pose_helpers_invert():
+    a, b = Pose2D(1.0, 2.0, 0.7), Pose2D(-0.3, 0.5, -2.0)
+    back = compose(inverse(a), compose(a, b))
+    assert (back.x_m, back.y_m, back.heading_rad) == pytest.approx((b.x_m, b.y_m, b.heading_rad))
+
+
+def test_connect_identifies_enables_and_sets_limits(driver, emulator):
+    assert driver.identity == arcos.RobotIdentity("Pioneer", "Pioneer", "p3dx")
+    motion = emulator.state.motion
+    assert emulator.state.open and motion.enabled
+    assert (motion.speed_max_mm_s, motion.turn_max_deg_s) == (1200, 120)
+    assert (motion.accel_mm_s2, motion.decel_mm_s2, motion.turn_decel_deg_s2) == (300, 300, 300)
+    assert driver.reading().pose == Pose2D(1.5, 1.5, 0.0)  # the robot's zero, placed at the start given
+
+
+def test_probe_names_the_robot(emulator):
+    assert probe(emulator.path) == {"device": "pioneer", "name": "Pioneer", "type": "Pioneer", "subtype": "p3dx"}
+
+
+def test_probe_of_a_silent_port_is_a_device_fault(emulator):
+    emulator.unplug()
+    with pytest.raises(DeviceFault, match="no ARCOS robot answered"):
+        probe(emulator.path, timeout_ms=100)
+
+
+def test_turn_then_drive_reaches_the_goal(driver, sim_base):
+    outcome = driver.move(math.radians(90), 0.3, 0.5, threading.Event())
+    assert outcome.status == "done" and outcome.distance_m == pytest.approx(0.3, abs=0.02)
+    truth = sim_base.true_pose
+    assert (truth.x_m, truth.y_m) == (pytest.approx(1.5, abs=0.02), pytest.approx(1.8, abs=0.02))
+    assert truth.heading_rad == pytest.approx(math.pi / 2, abs=math.radians(1.5))
+    pose = driver.reading().pose  # no odometry noise in this room: the driver's odometry is the truth
+    assert (pose.x_m, pose.y_m) == (pytest.approx(truth.x_m, abs=0.005), pytest.approx(truth.y_m, abs=0.005))
+    # and back the other way, over the ±180° seam
+    outcome = driver.move(math.radians(-200), 0.0, 0.5, threading.Event())
+    assert outcome.status == "done"
+    assert sim_base.true_pose.heading_rad == pytest.approx(math.radians(-110), abs=math.radians(1.5))
+
+
+def test_stop_while_moving(driver, sim_base, emulator):
+    with ThreadPoolExecutor(1) as pool:
+        running = pool.submit(driver.move, 0.0, 2.0, 0.5, threading.Event())
+        assert wait_until(lambda: driver.reading().speed_m_s > 0.2, 3.0)
+        driver.stop()
+        outcome = running.result(timeout=1.0)
+    assert outcome.status == "stopped" and 0.05 < outcome.distance_m < 1.0
+    assert driver.wire_times.stop_wire_s - driver.wire_times.stop_called_s < 0.02
+    assert wait_until(lambda: not driver.reading().moving, 2.0)
+    motion = [c for c in emulator.history() if c[0] in (Command.VEL, Command.RVEL, Command.HEAD)]
+    assert motion[-2:] == [(Command.VEL, 0), (Command.RVEL, 0)]  # nothing of the move after the stop
+
+
+def test_cancel_ends_a_move_as_stopped(driver):
+    cancel = threading.Event()
+    threading.Timer(0.5, cancel.set).start()
+    outcome = driver.move(math.radians(170), 0.0, 0.5, cancel)
+    assert outcome.status == "stopped"
+    assert wait_until(lambda: not driver.reading().moving, 2.0)
+
+
+def test_driving_into_a_wall_is_a_stall(room_base):
+    base = room_base(Pose2D(5.2, 1.5, 0.0))  # the east wall 0.54 m ahead of the footprint
+    with PioneerEmulator(PioneerServerState(base, PioneerEmulatorConfig(subtype="p3dx-sh"))) as emu:
+        driver = PioneerBase(PioneerConfig(port=emu.path, **FAST_LINK), LIMITS, start=base.true_pose)
+        try:
+            outcome = driver.move(0.0, 1.0, 0.5, threading.Event())
+            assert outcome.status == "stalled"
+            assert outcome.distance_m == pytest.approx(0.54, abs=0.02)
+            assert driver.reading().stalled or not driver.reading().moving
+        finally:
+            driver.close()
+
+
+def test_link_drop_faults_refuses_motion_and_reconnects(driver, emulator):
+    with ThreadPoolExecutor(1) as pool:
+        running = pool.submit(driver.move, 0.0, 3.0, 0.3, threading.Event())
+        assert wait_until(lambda: driver.reading().speed_m_s > 0.2, 3.0)
+        emulator.unplug()
+        with pytest.raises(DeviceFault, match="link down|no status"):
+            running.result(timeout=2.0)
+    with pytest.raises(DeviceFault, match="reconnecting"):
+        driver.reading()
+    with pytest.raises(DeviceFault):
+        driver.move(0.0, 0.2, 0.3, threading.Event())
+    # Unheard, the robot drives on until its own watchdog halts it.
+    assert wait_until(lambda: emulator.snapshot()[1], 3.0)
+    assert wait_until(lambda: emulator.snapshot()[2] == 0.0, 2.0)
+    last = driver._continue_from
+    emulator.plug()  # the old session is still open: the driver closes it and starts again
+    assert wait_until(lambda: _answers(driver), 5.0)
+    pose = driver.reading().pose
+    assert pose.x_m == pytest.approx(last.x_m, abs=0.01)  # odometry carries on across sessions
+    time.sleep(0.5)
+    assert emulator.snapshot()[2] == 0.0  # the last motion did not resume
+    outcome = driver.move(0.0, 0.2, 0.3, threading.Event())
+    assert outcome.status == "done" and outcome.distance_m == pytest.approx(0.2, abs=0.02)
+
+
+def test_idle_driver_keeps_the_watchdog_quiet(driver, emulator):
+    time.sleep(2.5)
+    assert not emulator.snapshot()[1]
+    assert (Command.PULSE, None) in emulator.history()
+
+
+def test_close_disables_the_motors_and_ends_the_session(emulator, sim_base):
+    driver = PioneerBase(PioneerConfig(port=emulator.path, **FAST_LINK), LIMITS, start=sim_base.true_pose)
+    driver.close()
+    assert wait_until(lambda: not emulator.snapshot()[0], 1.0)
+    assert emulator.history()[-4:] == [(Command.VEL, 0), (Command.RVEL, 0), (Command.ENABLE, 0), (Command.CLOSE, 1)]
+
+
+def test_emulator_tolerates_aria_preamble_and_halts_on_silence(emulator):
+    """ARIA's ``WMS2\\r`` first; then a session that falls silent halts after 2 s and resumes on PULSE."""
+    with serial.serial_for_url(emulator.path, timeout=0.5) as port:
+        port.write(b"WMS2\r")
+        for sync in (Command.SYNC0, Command.SYNC1, Command.SYNC2):
+            port.write(build_packet(sync))
+            time.sleep(0.07)
+        replies = arcos.PacketReader().feed(port.read(200))
+        assert [p.id for p in replies] == [0, 1, 2]
+        assert arcos.parse_sync2(replies[2].payload).subtype == "p3dx"
+        for packet in (build_packet(Command.OPEN, 1), build_packet(Command.ENABLE, 1), build_packet(Command.VEL, 200)):
+            port.write(packet)
+            time.sleep(0.01)
+        assert wait_until(lambda: emulator.snapshot()[2] == 200.0, 2.0)
+        assert wait_until(lambda: emulator.snapshot()[1] and emulator.snapshot()[2] == 0.0, 3.0)
+        port.write(build_packet(Command.PULSE))
+        assert wait_until(lambda: emulator.snapshot()[2] == 200.0, 2.0)
+        port.write(build_packet(Command.CLOSE, 1))
+
+
+def _answers(driver: PioneerBase) -> bool:
+    try:
+        driver.reading()
+    except DeviceFault:
+        return False
+    return True
+
