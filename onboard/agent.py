@@ -38,8 +38,12 @@ _REQUEST_TYPES: dict[str, type] = {
     "move": m.MoveCommand, "stop": m.StopCommand, "look": m.LookCommand,
     "capture": m.CaptureCommand, "state": m.StateRequest, "info": m.InfoRequest,
     "sim_truth": m.StateRequest, "sim_teleport": m.SimTeleport, "sim_reset": m.SimReset,
+    "sim_fault": m.SimFault,
 }
-_SIM_ONLY = ("sim_truth", "sim_teleport", "sim_reset")
+_SIM_ONLY = ("sim_truth", "sim_teleport", "sim_reset", "sim_fault")
+# Only a planner's commands count as word from it: anyone may poll state or info (an observer, a
+# dashboard, a crowd of them), and that must not keep alive a motion whose planner froze.
+_PLANNER_COMMANDS = ("move", "stop", "look", "capture")
 
 
 class CommandRefused(Exception):
@@ -162,8 +166,11 @@ class Agent:
     # --- callbacks: never block ----------------------------------------------------------------------
 
     def _enqueuer(self, kind: str) -> Callable[[zenoh.Query], None]:
+        contact = kind in _PLANNER_COMMANDS
+
         def enqueue(query: zenoh.Query) -> None:
-            self._watch.last_contact_s = time.monotonic()
+            if contact:
+                self._watch.last_contact_s = time.monotonic()
             try:
                 self._commands.put_nowait((kind, query))
             except queue.Full:
@@ -197,8 +204,9 @@ class Agent:
             except CommandRefused as exc:
                 log.warning("%s refused: %s", kind, exc)
                 self._reply_error(query, _guess_command_id(payload), exc.code, str(exc))
-            except Exception as exc:  # a device fault: answer, log, keep serving
+            except Exception as exc:  # a device fault: make the robot safe, answer, keep serving
                 log.exception("%s failed", kind)
+                self._stop_all(f"{kind} failed")
                 self._reply_error(query, _guess_command_id(payload), "device", f"{type(exc).__name__}: {exc}")
 
     def _submit(self, device: str, query: zenoh.Query, command_id: str, job: Callable[[], object],
@@ -206,8 +214,9 @@ class Agent:
         def run() -> Callable[[], None]:
             try:
                 result = job()
-            except Exception as exc:  # a device fault: answer it (exc is gone once this block ends)
+            except Exception as exc:  # a device fault: the motors may still run, so stop, then answer
                 log.exception("%s job failed", device)
+                self._stop_all(f"{device} fault")
                 text = f"{type(exc).__name__}: {exc}"
                 return lambda: self._reply_error(query, command_id, "device", text)
             return lambda: self._reply(query, result, arrays)
@@ -312,6 +321,11 @@ class Agent:
         problem = self._sim.reset(cmd.start.to_pose(), cmd.target_m, cmd.target_yaw_deg, cmd.seed)
         if problem:
             raise CommandRefused("limit", problem)
+        self._on_sim_truth(query, m.StateRequest(cmd.command_id))
+
+    def _on_sim_fault(self, query: zenoh.Query, cmd: m.SimFault) -> None:
+        self._sim.inject_fault(cmd.device, cmd.after_s)
+        log.warning("simulator: the %s's next operation will fail %.3f s into it", cmd.device, cmd.after_s)
         self._on_sim_truth(query, m.StateRequest(cmd.command_id))
 
     # --- state, publishing, watchdog -----------------------------------------------------------------

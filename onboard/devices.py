@@ -104,6 +104,9 @@ class SimControl(Protocol):
         """A new run in the same simulator: the target placed, the robot at ``start``, the head
         centred, the noise reseeded; the reason if that cannot be."""
 
+    def inject_fault(self, device: str, after_s: float) -> None:
+        """Make ``device``'s next operation fail ``after_s`` into it (see ``onboard.sim.faults``)."""
+
 
 @dataclass
 class Devices:

@@ -11,6 +11,7 @@
 | ``syt/<id>/sim/truth``       | queryable   | StateRequest → SimTruth (simulator)  |
 | ``syt/<id>/sim/teleport``    | queryable   | SimTeleport → SimTruth (simulator)   |
 | ``syt/<id>/sim/reset``       | queryable   | SimReset → SimTruth (simulator)      |
+| ``syt/<id>/sim/fault``       | queryable   | SimFault → SimTruth (simulator)      |
 | ``syt/<id>/odometry``        | publication | Odometry, steady rate, latest-only   |
 | ``syt/<id>/pantilt``         | publication | PanTiltState, steady rate            |
 | ``syt/<id>/heartbeat``       | publication | Heartbeat, from the planner          |
@@ -80,6 +81,10 @@ class RobotKeys:
     @property
     def sim_reset(self) -> str:
         return self._key("sim/reset")
+
+    @property
+    def sim_fault(self) -> str:
+        return self._key("sim/fault")
 
     @property
     def odometry(self) -> str:

@@ -315,8 +315,22 @@ class SimReset:
             raise ValueError(f"target_m must be 3 finite coordinates in metres, got {self.target_m}")
 
 
+@dataclass(frozen=True)
+class SimFault:
+    """Simulator only, for tests: the device's next operation (a move, a look, a capture) fails
+    ``after_s`` of robot time into it, as a broken driver would: the call raises while the device
+    itself goes on (the wheels keep turning) until the agent stops it."""
+
+    command_id: str
+    device: Literal["base", "pantilt", "camera"]
+    after_s: float = field(default=0.0, metadata=bounds(0.0, 3600.0))
+
+    def __post_init__(self) -> None:
+        _check_id(self.command_id)
+
+
 MESSAGE_TYPES: dict[str, type] = {cls.__name__: cls for cls in (
     MoveCommand, StopCommand, LookCommand, CaptureCommand, StateRequest, InfoRequest,
     ErrorReply, MoveResult, StopResult, LookResult, Capture, RobotState, StateReply, Odometry,
-    PanTiltState, Info, Heartbeat, SimTruth, SimTeleport, SimReset,
+    PanTiltState, Info, Heartbeat, SimTruth, SimTeleport, SimReset, SimFault,
 )}

@@ -11,6 +11,7 @@ from onboard.config import OnboardConfig
 from onboard.devices import Devices, StereoImages
 from onboard.sim.base import SimBase
 from onboard.sim.clock import SimClock
+from onboard.sim.faults import FaultInjector
 from onboard.sim.pantilt import SimPanTilt
 from onboard.sim.render import StereoRenderer
 from shared.world import World, WorldError
@@ -51,9 +52,10 @@ class SimRobot:
     """The simulated devices and the :class:`onboard.devices.SimControl` over them."""
 
     def __init__(self, world: World, devices: Devices, base: SimBase, pantilt: SimPanTilt,
-                 camera: SimStereoCamera) -> None:
+                 camera: SimStereoCamera, faults: FaultInjector) -> None:
         self.world, self.devices = world, devices
         self._base, self._pantilt, self._camera = base, pantilt, camera
+        self._faults = faults
 
     @property
     def true_pose(self) -> Pose2D:
@@ -61,6 +63,9 @@ class SimRobot:
 
     def teleport(self, pose: Pose2D) -> str | None:
         return self._base.teleport(pose)
+
+    def inject_fault(self, device: str, after_s: float) -> None:
+        self._faults.arm(device, after_s)
 
     def reset(self, start: Pose2D, target_m: tuple[float, float, float], target_yaw_deg: float,
               seed: int) -> str | None:
@@ -95,4 +100,6 @@ def build_sim_robot(config: OnboardConfig, world: World) -> SimRobot:
     camera = SimStereoCamera(renderer, base, pantilt, clock, config.timing)
     log.info("simulated robot in world %r at (%.2f, %.2f), %s clock", world.name, world.start.x_m,
              world.start.y_m, "real-time" if sim.realtime else "fast")
-    return SimRobot(world, Devices("sim", clock, base, pantilt, camera), base, pantilt, camera)
+    faults = FaultInjector(clock)
+    devices = faults.wrap(Devices("sim", clock, base, pantilt, camera))
+    return SimRobot(world, devices, base, pantilt, camera, faults)

@@ -35,7 +35,7 @@ EXAMPLES = [
     m.Odometry(3, POSE, 0.2, 10.0, True, False, 1.0), m.PanTiltState(4, 1.0, 2.0, False, 1.0),
     m.Info("c14", "syt", "sim", BaseLimits(), PanTiltLimits(), CameraTiming(), INTR, MOUNT, 1000),
     m.Heartbeat("planner-1", 7), m.SimTruth("c15", POSE, 1.0), m.SimTeleport("c16", POSE),
-    m.SimReset("c17", POSE, (1.7, 4.5, 0.75), -90.0, 3),
+    m.SimReset("c17", POSE, (1.7, 4.5, 0.75), -90.0, 3), m.SimFault("c18", "base", 0.5),
 ]
 
 
