@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -183,6 +184,34 @@ class World:
 
 def bundled_world_names() -> list[str]:
     return sorted(p.stem for p in WORLDS_DIR.glob("*.toml"))
+
+
+def suite_names() -> list[str]:
+    """The bundled suites: folders of ``shared/worlds`` holding world files (``dev``, ``test``)."""
+    return sorted(p.name for p in WORLDS_DIR.iterdir() if p.is_dir() and any(p.glob("*.toml")))
+
+
+def suite_worlds(name: str) -> list[Path]:
+    """The world files of a bundled suite, sorted."""
+    if name not in suite_names():
+        raise WorldError(f"{name}: no such world suite (suites: {', '.join(suite_names())})")
+    return sorted((WORLDS_DIR / name).glob("*.toml"))
+
+
+def expand_suites(names: Iterable[str]) -> tuple[str, ...]:
+    """World names and files with every suite name replaced by the paths of its worlds."""
+    suites = suite_names()
+    expanded: list[str] = []
+    for name in names:
+        is_suite = name in suites and not Path(name).is_file()
+        expanded += [str(path) for path in suite_worlds(name)] if is_suite else [name]
+    return tuple(expanded)
+
+
+def suite_of(path: str | Path) -> str | None:
+    """The bundled suite a world file belongs to, or None."""
+    folder = Path(path).resolve().parent
+    return folder.name if folder.parent == WORLDS_DIR.resolve() and folder.name in suite_names() else None
 
 
 def load_world(path_or_name: str | Path, *, robot_radius_m: float = DEFAULT_ROBOT_RADIUS_M) -> World:
@@ -346,6 +375,46 @@ def _texture(value: Any, key: str) -> str | None:
     if value is None:
         return None
     return _string(value, key)
+
+
+# ----------------------------------------------------------------------------- writing
+
+
+def world_toml(data: dict[str, Any], comment: str = "") -> str:
+    """World data (what ``parse_world`` reads: scalars, tables, arrays of tables) as TOML text."""
+    lines = [f"# {line}".rstrip() for line in comment.splitlines()]
+    lines += _toml_pairs({k: v for k, v in data.items() if not isinstance(v, dict) and not _is_tables(v)})
+    for key, value in data.items():
+        if isinstance(value, dict):
+            lines += ["", f"[{key}]", *_toml_pairs(value)]
+        elif _is_tables(value):
+            for table in value:
+                lines += ["", f"[[{key}]]", *_toml_pairs(table)]
+    return "\n".join(lines) + "\n"
+
+
+def _is_tables(value: Any) -> bool:
+    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
+
+
+def _toml_pairs(table: dict[str, Any]) -> list[str]:
+    return [f"{key} = {_toml_value(value)}" for key, value in table.items()]
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(int(value))
+    if isinstance(value, float):  # numpy floats too: written as plain Python floats
+        if not math.isfinite(value):
+            raise WorldError(f"cannot write the non-finite number {value!r} to a world file")
+        return repr(float(value))
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise WorldError(f"cannot write {type(value).__name__} {value!r} to a world file")
 
 
 # ----------------------------------------------------------------------------- validation
