@@ -4,6 +4,7 @@
     syt-onboard render --world FILE [--start ..] [--pan DEG] [--tilt DEG] --out DIR
     syt-onboard bench --json
     syt-onboard picture NAME --out FILE.png          a built-in picture (the target's) for the planner
+    syt-onboard worlds generate --count N --seed S --out DIR     checked rooms room-S-K.toml
 """
 
 from __future__ import annotations
@@ -152,7 +153,31 @@ def run_picture(argv: list[str]) -> int:
     return 0
 
 
-_COMMANDS = {"render": run_render, "bench": run_bench, "picture": run_picture}
+def run_worlds(argv: list[str]) -> int:
+    """``worlds generate``: furnished rooms, each checked to be searchable before it is written."""
+    parser = argparse.ArgumentParser(prog="syt-onboard worlds", description="World files.")
+    commands = parser.add_subparsers(dest="command", required=True)
+    generate = commands.add_parser("generate", help="write N generated rooms DIR/room-S-K.toml (same seed, same files)")
+    generate.add_argument("--count", type=int, required=True, metavar="N")
+    generate.add_argument("--seed", type=int, required=True, metavar="S")
+    generate.add_argument("--out", type=Path, required=True, metavar="DIR")
+    args = parser.parse_args(argv)
+    _setup_logging(False)
+    if args.count < 1:
+        parser.error(f"--count: must be at least 1, got {args.count}")
+    from onboard.sim.world_generator import write_worlds
+
+    try:
+        paths = write_worlds(args.count, args.seed, args.out)
+    except (OSError, RuntimeError) as exc:
+        log.error("%s", exc)
+        return 1
+    for path in paths:
+        sys.stdout.write(f"{path}\n")
+    return 0
+
+
+_COMMANDS = {"render": run_render, "bench": run_bench, "picture": run_picture, "worlds": run_worlds}
 
 
 def main(argv: list[str] | None = None) -> int:
