@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import logging
 import math
-import select
 import threading
 import time
 from collections import deque
@@ -26,6 +25,7 @@ from typing import Protocol
 
 from onboard.devices import BaseReading
 from onboard.emulators.pty import PseudoTerminal
+from onboard.emulators.tcp import TcpPort
 from onboard.hardware import arcos
 from onboard.hardware.arcos import ArcosError, Command, Packet
 from shared.geometry import Pose2D, wrap_angle
@@ -304,9 +304,10 @@ _MOTION_COMMANDS = (Command.VEL, Command.MOVE, Command.RVEL, Command.ROTATE, Com
 
 
 class PioneerEmulator:
-    """Serves a :class:`PioneerServerState` on a pseudo-terminal, in real time, from one thread."""
+    """Serves a :class:`PioneerServerState` in real time, from one thread, on a pseudo-terminal (the
+    default) or on a TCP port as the vendor's simulators do (``TcpPort``, a ``socket://`` URL)."""
 
-    def __init__(self, state: PioneerServerState, terminal: PseudoTerminal | None = None):
+    def __init__(self, state: PioneerServerState, terminal: PseudoTerminal | TcpPort | None = None):
         self.state = state
         self._terminal = terminal or PseudoTerminal()
         self._reader = arcos.PacketReader()
@@ -318,7 +319,7 @@ class PioneerEmulator:
 
     @property
     def path(self) -> str:
-        """The device path a client opens."""
+        """The device path (or pyserial URL) a client opens."""
         return self._terminal.path
 
     def start(self) -> PioneerEmulator:
@@ -357,10 +358,8 @@ class PioneerEmulator:
         self.close()
 
     def _serve(self) -> None:
-        fd = self._terminal.master_fd
         while not self._stop.is_set():
-            ready, _, _ = select.select([fd], [], [], PHYSICS_STEP_S)
-            data = self._terminal.read() if ready else b""
+            data = self._terminal.read() if self._terminal.wait_readable(PHYSICS_STEP_S) else b""
             replies: list[bytes] = []
             with self._lock:
                 now = time.monotonic()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import select
 import tty
 
 
@@ -19,6 +20,10 @@ class PseudoTerminal:
         tty.setraw(self._slave_fd)  # no echo, no line editing, no CR/LF translation: bytes pass as they are
         os.set_blocking(self.master_fd, False)
         self.path = os.ttyname(self._slave_fd)
+
+    def wait_readable(self, timeout_s: float) -> bool:
+        """Wait up to ``timeout_s`` for bytes from the client."""
+        return bool(select.select([self.master_fd], [], [], timeout_s)[0])
 
     def read(self, size: int = 4096) -> bytes:
         """What the client wrote (empty if nothing is waiting)."""

@@ -12,6 +12,7 @@ import pytest
 import serial
 
 from onboard.emulators.pioneer import PioneerEmulator, PioneerEmulatorConfig, PioneerServerState
+from onboard.emulators.tcp import TcpPort
 from onboard.hardware import arcos
 from onboard.hardware.arcos import Command, build_packet
 from onboard.hardware.fault import DeviceFault
@@ -193,3 +194,15 @@ def _answers(driver: PioneerBase) -> bool:
         return False
     return True
 
+
+
+def test_the_driver_talks_tcp_as_to_the_vendors_simulator(sim_base):
+    """A ``socket://`` URL, as MobileSim and AMRISim serve ARCOS on port 8101."""
+    with PioneerEmulator(PioneerServerState(sim_base, PioneerEmulatorConfig()), TcpPort()) as emulator:
+        assert emulator.path.startswith("socket://127.0.0.1:")
+        driver = PioneerBase(PioneerConfig(port=emulator.path, **FAST_LINK), LIMITS, start=sim_base.true_pose)
+        try:
+            outcome = driver.move(0.0, 0.2, 0.4, threading.Event())
+        finally:
+            driver.close()
+    assert outcome.status == "done" and sim_base.true_pose.x_m == pytest.approx(1.7, abs=0.02)
