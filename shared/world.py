@@ -199,13 +199,20 @@ def suite_worlds(name: str) -> list[Path]:
 
 
 def expand_suites(names: Iterable[str]) -> tuple[str, ...]:
-    """World names and files with every suite name replaced by the paths of its worlds."""
+    """World names and files with every suite name replaced by the names of its worlds
+    (``test`` → ``test/room-2000-0``, ...: bundled names that ``load_world`` takes anywhere)."""
     suites = suite_names()
     expanded: list[str] = []
     for name in names:
         is_suite = name in suites and not Path(name).is_file()
-        expanded += [str(path) for path in suite_worlds(name)] if is_suite else [name]
+        expanded += [f"{name}/{path.stem}" for path in suite_worlds(name)] if is_suite else [name]
     return tuple(expanded)
+
+
+def _is_bundled_name(name: str) -> bool:
+    """``NAME`` (a bundled world) or ``SUITE/NAME`` (a world of a bundled suite)."""
+    parts = name.split("/")
+    return len(parts) == 1 or (len(parts) == 2 and parts[0] in suite_names())
 
 
 def suite_of(path: str | Path) -> str | None:
@@ -215,7 +222,7 @@ def suite_of(path: str | Path) -> str | None:
 
 
 def load_world(path_or_name: str | Path, *, robot_radius_m: float = DEFAULT_ROBOT_RADIUS_M) -> World:
-    """Load a bundled world by name (``"paper-lab"``) or a world file by path."""
+    """Load a bundled world by name (``"paper-lab"``, ``"test/room-2000-0"``) or a world file by path."""
     path = resolve_world(path_or_name)
     try:
         text = path.read_text(encoding="utf-8")
@@ -237,7 +244,7 @@ def resolve_world(path_or_name: str | Path) -> Path:
     if path.is_file():
         return path
     bundled = WORLDS_DIR / f"{path_or_name}.toml"
-    if isinstance(path_or_name, str) and "/" not in path_or_name and bundled.is_file():
+    if isinstance(path_or_name, str) and _is_bundled_name(path_or_name) and bundled.is_file():
         return bundled
     raise WorldError(
         f"{path_or_name}: no such world file and no bundled world of that name "
