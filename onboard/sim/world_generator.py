@@ -8,9 +8,9 @@ floor stand flush against a wall or at least ``GAP_M`` from the walls, and at le
 each other, so the robot (0.62 m across with its clearance) can pass between any two of them. The
 target (one-sided, the built-in "target" picture, 0.23 m cube) stands near the front edge of a
 table, desk, cabinet, crate or shelf top, high (1.6-2.1 m), low (0.4-0.8 m) or in between, its picture
-facing at least ``OPEN_FLOOR_M`` of open floor. The robot starts in the open floor, at least 1 m
-from the target. A few posters (distractors, never the target's picture nor "chelsea") hang on
-the walls.
+facing at least ``OPEN_FLOOR_M`` of open floor. The robot starts in the open floor, 3 m or more from
+the target where the room allows (never under 1.5 m). A few posters (distractors, never the
+target's picture nor "chelsea") hang on the walls.
 
 Everything is drawn from the ``numpy`` generator given, so a seed makes the same rooms.
 """
@@ -38,8 +38,9 @@ ROOM_SIDE_M = (4.0, 12.0)
 ROOM_HEIGHT_M = (2.4, 3.0)
 GAP_M = 0.8  # between floor pieces, and between a piece and a wall it does not touch
 STACK_GAP_M = 0.35  # a wall shelf clears whatever stands under it by this much
-OPEN_FLOOR_M = 1.2  # free floor in front of the target's picture
+OPEN_FLOOR_M = 1.5  # free floor in front of the target's picture
 START_MARGIN_M = 0.45  # the start keeps this from walls and obstacles: open floor, not a niche
+START_FAR_M = 3.0  # the start this far from the target if the room allows: a search, not a glance
 TARGET_SIZE_M = 0.23
 TARGET_EDGE_M = 0.15  # the target's centre keeps this from the sides of its support
 MAX_TURN_DEG = 10.0  # half the targets are turned by up to this from square to their edge
@@ -225,10 +226,11 @@ def _place_target(rng: np.random.Generator, room: tuple[float, float, float], pi
     for group in (preferred, others):
         for index in rng.permutation(len(group)):
             support = group[int(index)]
-            facings = [(_open_floor_m(room, pieces, support, f), f) for f in _facings(support)]
-            facings = [(open_m, f) for open_m, f in facings if open_m >= OPEN_FLOOR_M]
-            if facings:
-                return _target_on(rng, support, max(facings)[1])
+            options = [(_open_floor_m(room, pieces, support, f, target["position"]), k, target)
+                       for k, f in enumerate(_facings(support)) for target in [_target_on(rng, support, f)]]
+            options = [option for option in options if option[0] >= OPEN_FLOOR_M]
+            if options:
+                return max(options)[2]
     raise WorldRejected("no table, desk, cabinet, crate or shelf top faces open floor")
 
 
@@ -246,11 +248,11 @@ def _facings(p: Piece) -> list[tuple[int, int]]:
 
 
 def _open_floor_m(room: tuple[float, float, float], pieces: list[Piece], support: Piece,
-                  facing: tuple[int, int], cap_m: float = 3.0) -> float:
-    """Free floor in front of the support's edge along ``facing``, in a strip a robot wide."""
+                  facing: tuple[int, int], target_xy: list[float], cap_m: float = 3.0) -> float:
+    """Free floor in front of the target, from the support's edge along ``facing``, in a strip a robot wide."""
     axis, sign = (0, facing[0]) if facing[0] else (1, facing[1])
     edge = support.hi[axis] if sign > 0 else support.lo[axis]
-    centre = [(support.lo[a] + support.hi[a]) / 2 for a in (0, 1)]
+    centre = list(target_xy[:2])
     blockers = [p.rect() for p in pieces if p.on_floor() and p is not support]
     for step in np.arange(0.05, cap_m, 0.05):
         point = list(centre)
@@ -286,7 +288,7 @@ def _target_on(rng: np.random.Generator, support: Piece, facing: tuple[int, int]
 def _place_start(rng: np.random.Generator, room: tuple[float, float, float], pieces: list[Piece],
                  target: dict[str, Any]) -> dict[str, Any]:
     """A cell of open floor (``START_MARGIN_M`` from everything) in the largest drivable area, at
-    least 1.5 m from the target."""
+    least ``START_FAR_M`` from the target where the room allows, else at least 1.5 m."""
     rects = [p.rect() for p in pieces if p.on_floor()]
     open_floor = clearance_grid(room[:2], rects, START_MARGIN_M)
     drivable = clearance_grid(room[:2], rects, DRIVE_CLEARANCE_M)
@@ -294,8 +296,10 @@ def _place_start(rng: np.random.Generator, room: tuple[float, float, float], pie
     largest = int(np.argmax(np.bincount(labels[labels > 0]))) if np.any(labels > 0) else -1
     x, y = open_floor.centres()
     tx, ty = target["position"][:2]
-    ok = open_floor.drivable & (labels == largest) & (np.hypot(x - tx, y - ty) >= 1.5)
-    cells = np.argwhere(ok)
+    ok = open_floor.drivable & (labels == largest)
+    gap = np.hypot(x - tx, y - ty)
+    cells = np.argwhere(ok & (gap >= START_FAR_M))
+    cells = cells if len(cells) else np.argwhere(ok & (gap >= 1.5))
     if not len(cells):
         raise WorldRejected("no open floor for the start at least 1.5 m from the target")
     i, j = cells[int(rng.integers(len(cells)))]
