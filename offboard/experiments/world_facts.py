@@ -22,7 +22,7 @@ import numpy as np
 from offboard.navigation import grid_planner
 from offboard.perception.occupancy import FloorMap
 from shared.strict import bounds
-from shared.world import Box, load_world, resolve_world
+from shared.world import Box, load_world, resolve_world, suite_of
 
 Vec3 = tuple[float, float, float]
 Start = tuple[float, float, float]  # x, y, heading° (the agent's --start)
@@ -225,7 +225,7 @@ def target_placements(world: WorldFacts, count: int = 4,
     drive = SeeingCriteria(robot_radius_m=drive_clearance_m)
     per_table = [[p for p in _table_placements(world, t) if math.isfinite(viewpoint(world.truth(p), world.start[:2], drive)[1])]
                  for t in world.tables()]
-    chosen = []
+    chosen = [world.target] if suite_of(world.path) else []  # a suite world's own target: checked, and first
     for rank in range(max((len(p) for p in per_table), default=0)):
         chosen += [p[rank] for p in per_table if rank < len(p)]
     if len(chosen) < count and world.target not in chosen:
