@@ -74,6 +74,7 @@ DIFF_CONV_FACTOR = 0.0056  # ARIA's P3-DX value: rad/s per mm/s of (right - left
 # DistConvFactor (mm per XPOS/YPOS unit) of controllers without the SH firmware, by SYNC2 subtype.
 _LEGACY_DIST_CONV = {"p3dx": 0.485, "p3at": 0.465}
 _SIP_MIN_PAYLOAD = 19  # XPOS … SONAR COUNT: offsets 1 … 19 from the type byte
+_SIP_IO_BYTES = 5  # after the sonar readings; ARIA reads them when present
 
 
 class ArcosError(ValueError):
@@ -321,6 +322,7 @@ def encode_sip(sip: Sip) -> bytes:
                           sip.left_mm_s, sip.right_mm_s, max(0, min(255, round(sip.battery_v * 10))), stall,
                           rad_to_thpos(sip.control_rad), int(sip.motors_enabled), 0, len(sip.sonar_mm))
     body += b"".join(struct.pack("<BH", disc, mm) for disc, mm in sip.sonar_mm)
+    body += bytes(_SIP_IO_BYTES)  # gripper state, analog port, analog, digital in, digital out: none here
     return frame(bytes((SIP_MOVING if sip.moving else SIP_STOPPED,)) + body)
 
 

@@ -126,6 +126,7 @@ class PioneerBase:
             self._current()  # refused at once while the link is down
             with self._write_lock:
                 self._halted = False
+            self._ensure_enabled(cancel)
             started = time.monotonic()
             try:
                 status = self._turn(turn_rad, cancel) if turn_rad else "done"
@@ -230,6 +231,18 @@ class PioneerBase:
             status = self._next_status(status, cancel, deadline, "drive")
             if status is None:
                 return "stopped", driven
+
+    def _ensure_enabled(self, cancel: threading.Event) -> None:
+        """Motors off (the robot's motor button, an e-stop): ask once more, refuse if they stay off."""
+        status: _Status | None = self._current()
+        if status.motors_enabled:
+            return
+        self._send_motion(Command.ENABLE, 1)
+        deadline = time.monotonic() + 5 * _SIP_PERIOD_S
+        while status is not None and not status.motors_enabled:
+            if time.monotonic() > deadline:
+                raise DeviceFault(f"Pioneer on {self.config.port}: the motors stay disabled (motor button or e-stop?)")
+            status = self._next_status(status, cancel, deadline + 1.0, "motor enabling")
 
     def _next_status(self, after: _Status, cancel: threading.Event, deadline: float, what: str) -> _Status | None:
         """The next SIP's status; None if the motion was cancelled or stopped."""

@@ -103,7 +103,7 @@ def test_short_or_wrong_sips_are_refused():
         arcos.parse_sip(arcos.Packet(0x20, b"\x00" * 30))
     truncated = arcos.parse_packet(arcos.encode_sip(sample_sip()))
     with pytest.raises(ArcosError, match="sip sonar"):
-        arcos.parse_sip(arcos.Packet(truncated.id, truncated.payload[:-2]))
+        arcos.parse_sip(arcos.Packet(truncated.id, truncated.payload[:-7]))  # 5 I/O bytes, then 2 of a sonar
 
 
 def test_sync2_and_dist_conv_factor():

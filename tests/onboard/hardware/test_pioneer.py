@@ -206,3 +206,16 @@ def test_the_driver_talks_tcp_as_to_the_vendors_simulator(sim_base):
         finally:
             driver.close()
     assert outcome.status == "done" and sim_base.true_pose.x_m == pytest.approx(1.7, abs=0.02)
+
+
+def test_motors_disabled_are_enabled_again_or_refused(driver, emulator):
+    with emulator._lock:
+        emulator.state.motion.enabled = False  # someone pressed the motor button
+    assert wait_until(lambda: not driver._current().motors_enabled, 1.0)
+    assert driver.move(0.0, 0.1, 0.3, threading.Event()).status == "done"  # ENABLE 1 again, then the move
+    emulator.state.receive = lambda packet, now: []  # a robot that ignores everything now
+    with emulator._lock:
+        emulator.state.motion.enabled = False
+    assert wait_until(lambda: not driver._current().motors_enabled, 1.0)
+    with pytest.raises(DeviceFault, match="motors stay disabled"):
+        driver.move(0.0, 0.1, 0.3, threading.Event())
