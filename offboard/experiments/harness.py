@@ -435,7 +435,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--preset", choices=sorted(PRESETS), default="paper",
                         help="the grid to start from (paper: the report's 160 runs); the options below override it")
     parser.add_argument("--baselines", action="store_true", help="add every baseline to the methods")
-    parser.add_argument("--worlds", type=_list(str), metavar="W,..", help="bundled world names, world files or suites (dev, test)")
+    parser.add_argument("--worlds", type=_list(str), metavar="W,..",
+                        help="bundled world names, world files or suites (dev, test)")
     parser.add_argument("--costs", type=_list(int, (1, 2, 3, 4)), metavar="C,..")
     parser.add_argument("--priors", type=_list(str, PRIORS), metavar="P,..", help="uniform, tables")
     parser.add_argument("--seeds", type=_list(int), metavar="S,..", help="simulator seeds (and the random baseline's)")
@@ -460,8 +461,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def grid_from_args(args: argparse.Namespace) -> GridSpec:
     spec = PRESETS[args.preset]
-    given = {"worlds": args.worlds and expand_suites(args.worlds), "costs": args.costs, "priors": args.priors, "seeds": args.seeds,
-             "methods": args.methods, "starts": args.starts, "targets": args.targets,
+    given = {"worlds": args.worlds and expand_suites(args.worlds), "costs": args.costs, "priors": args.priors,
+             "seeds": args.seeds, "methods": args.methods, "starts": args.starts, "targets": args.targets,
              "start_overrides": tuple(args.start or ()), "target_overrides": tuple(args.target or ())}
     spec = replace(spec, **{k: v for k, v in given.items() if v})
     if args.baselines:
