@@ -4,6 +4,7 @@
     syt-offboard demo [--world paper-lab] [--out demo-out]   a simulated robot and a search, two processes
     syt-offboard tour --connect ENDPOINT --out DIR           a short scripted drive, saving the images
     syt-offboard bench perception|planner|navigation --json
+    syt-offboard bench safety --json [--load] [--trials N]  stop latencies when the planner is lost
     syt-offboard calibrate-detector --detector sift --target-picture P --out TABLE.json
     syt-offboard experiment --preset paper --out DIR [--baselines] [--jobs N]
 """
@@ -19,7 +20,7 @@ import time
 from pathlib import Path
 
 from shared.arguments import floats, probability
-from shared.transport import TransportConfig, add_transport_args, transport_from_args
+from shared.transport import DEFAULT_LEASE_MS, TransportConfig, add_transport_args, transport_from_args
 
 log = logging.getLogger("syt.offboard")
 
@@ -161,6 +162,11 @@ def _experiment(args: argparse.Namespace) -> int:
 # --- benchmarks ------------------------------------------------------------------------------------
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.what == "safety":
+        from offboard.bench.safety import run
+
+        sys.stdout.write(json.dumps(run(args.trials, args.lease_ms, args.load)) + "\n")
+        return 0
     if args.what == "planner":
         from offboard.bench.planner import run
     elif args.what == "perception":
@@ -203,8 +209,11 @@ def _parser() -> argparse.ArgumentParser:
     harness.add_arguments(experiment)
     experiment.set_defaults(func=_experiment)
     bench = sub.add_parser("bench", help="measure a part; prints one JSON object")
-    bench.add_argument("what", choices=("perception", "planner", "navigation"))
+    bench.add_argument("what", choices=("perception", "planner", "navigation", "safety"))
     bench.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")
+    bench.add_argument("--trials", type=int, default=20, help="safety: trials of each fault")
+    bench.add_argument("--lease-ms", type=int, default=DEFAULT_LEASE_MS, help="safety: the Zenoh link lease")
+    bench.add_argument("--load", action="store_true", help="safety: also measure under load (4 state clients)")
     bench.set_defaults(func=_bench)
     return parser
 
