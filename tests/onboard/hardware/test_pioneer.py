@@ -11,6 +11,7 @@ from concurrent.futures import ThreadPoolExecutor
 import pytest
 import serial
 
+from onboard.devices import MotionOutcome
 from onboard.emulators.pioneer import PioneerEmulator, PioneerEmulatorConfig, PioneerServerState
 from onboard.emulators.tcp import TcpPort
 from onboard.hardware import arcos
@@ -219,3 +220,12 @@ def test_motors_disabled_are_enabled_again_or_refused(driver, emulator):
     assert wait_until(lambda: not driver._current().motors_enabled, 1.0)
     with pytest.raises(DeviceFault, match="motors stay disabled"):
         driver.move(0.0, 0.1, 0.3, threading.Event())
+
+
+def test_a_move_cancelled_before_it_starts_writes_nothing(driver, emulator):
+    cancel = threading.Event()
+    cancel.set()
+    before = len([c for c in emulator.history() if c[0] in (Command.VEL, Command.RVEL, Command.HEAD)])
+    assert driver.move(math.radians(45), 0.5, 0.3, cancel) == MotionOutcome("stopped", 0.0, 0.0)
+    time.sleep(0.2)
+    assert len([c for c in emulator.history() if c[0] in (Command.VEL, Command.RVEL, Command.HEAD)]) == before
