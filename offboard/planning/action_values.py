@@ -100,6 +100,42 @@ class ActionGeometry:
         self.block_margin_m = 0.5 * belief.coarse_factor * belief.grid.resolution_m
         self.table = table
 
+    @classmethod
+    def stack(cls, parts: list[ActionGeometry]) -> ActionGeometry:
+        """One geometry of the positions of ``parts``, in order."""
+        whole = object.__new__(cls)
+        for name in ("positions_m", "centers_m", "distance_m", "sphere_bin", "distance_bin", "facing_bin",
+                     "off_axis_bin"):
+            setattr(whole, name, np.concatenate([getattr(p, name) for p in parts]))
+        whole.block_margin_m, whole.table = parts[0].block_margin_m, parts[0].table
+        return whole
+
+
+class GeometryCache:
+    """Action geometries of single positions, kept by lattice node: candidates come and go between
+    decisions, but each is placed on the lattice, so its geometry is computed once (least recently
+    used ones are dropped beyond ``capacity``)."""
+
+    def __init__(self, belief: TargetBelief, settings: CameraSettings, mount: HeadMount, intrinsics: Intrinsics,
+                 table: DetectabilityTable, bins: SphereBins, lattice_m: float, capacity: int = 256):
+        self._make = lambda xy: ActionGeometry(belief, xy[None], settings, mount, intrinsics, table, bins)
+        self.lattice_m = lattice_m
+        self.capacity = capacity
+        self._cache: dict[tuple[int, int], ActionGeometry] = {}
+
+    def rows(self, positions_m: np.ndarray) -> ActionGeometry:
+        parts = []
+        for xy in np.asarray(positions_m, np.float64):
+            key = tuple(int(v) for v in np.round(xy / self.lattice_m))
+            part = self._cache.pop(key, None)  # re-inserted below: the dict's order is the recency
+            if part is None or not np.allclose(part.positions_m[0], xy):
+                part = self._make(xy)
+            self._cache[key] = part
+            parts.append(part)
+        while len(self._cache) > self.capacity:
+            del self._cache[next(iter(self._cache))]
+        return ActionGeometry.stack(parts)
+
 
 def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSpheres) -> ActionValues:
     """Expected detection probability of every (position, setting), covering probability of every

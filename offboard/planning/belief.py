@@ -105,33 +105,47 @@ class TargetBelief:
         each of them and each facing sector, shape (n, facing_sectors). Returns the look's detection
         probability P_Ψ(f) (eq. 1) and folds it into P[F] (eq. 2).
         """
-        detection_prob = np.ascontiguousarray(detection_prob, np.float32).reshape(len(cube_index), self.facing_sectors)
-        removed = _remove_seen_mass(self._mass.reshape(-1, self.facing_sectors), self._coarse.reshape(-1, self.facing_sectors),
-                                    np.ascontiguousarray(cube_index, np.int64), detection_prob,
-                                    np.array(self.grid.shape, np.int64), np.array(self.coarse_shape, np.int64),
-                                    self.coarse_factor)
-        found_prob = removed * self._scale  # eq. 1: Σ p(c) b(c, f), before the update
-        self._stored_total -= removed
-        self._scale = 1.0 / self._stored_total  # eq. 4's denominator
+        b = np.ascontiguousarray(detection_prob, np.float32).reshape(len(cube_index), self.facing_sectors)
+        found_prob = self.observe(cube_index, 1.0 - b)  # eq. 1: Σ p(c) b(c, f), before the update
         self.success_prob += (1.0 - self.success_prob) * found_prob  # eq. 2, one more term
-        if self._scale > 1e6:  # keep stored values in float32's comfortable range
-            self._renormalise()
         return found_prob
 
-    def concentrate(self, position_m: np.ndarray, sigma_m: float) -> None:
-        """After a detection: the target is at ``position_m`` give or take ``sigma_m``."""
-        centers = self.grid.centers()
-        d2 = np.sum((centers - np.asarray(position_m)) ** 2, axis=-1)
-        weights = np.exp(-0.5 * d2 / sigma_m**2)
-        if weights.sum() <= 0:
-            raise ValueError(f"detection at {position_m} lies outside the search region")
-        facing = self._mass.sum(axis=(0, 1, 2), dtype=np.float64)
-        facing = facing / facing.sum() if facing.sum() > 0 else np.full(self.facing_sectors, 1.0 / self.facing_sectors)
-        self._mass[:] = (weights / weights.sum())[..., None] * facing
-        self._outside = 0.0
-        self._scale = 1.0
-        self._stored_total = 1.0
-        self._rebuild_coarse()
+    def expected_detection(self, cube_index: np.ndarray, detection_prob: np.ndarray) -> float:
+        """Eq. 1, P_Ψ(f) = Σ p(c) b(c, f), over a look's cubes, without updating anything."""
+        mass = self._mass.reshape(-1, self.facing_sectors)[np.asarray(cube_index, np.int64)]
+        b = np.asarray(detection_prob, np.float64).reshape(mass.shape)
+        return float((mass * b).sum()) * self._scale
+
+    def observe(self, cube_index: np.ndarray, likelihood: np.ndarray) -> float:
+        """Bayes' rule for one observation: every listed cube's mass, per facing sector, times its
+        ``likelihood`` (n, facing_sectors) relative to every other cube and to c_out, whose factor is
+        1; then normalised (eq. 4's denominator). Returns the probability that left the listed cubes
+        (negative if they gained)."""
+        likelihood = np.ascontiguousarray(likelihood, np.float32).reshape(len(cube_index), self.facing_sectors)
+        if np.any(likelihood < 0) or not np.all(np.isfinite(likelihood)):
+            raise ValueError("likelihoods must be finite and non-negative")
+        removed = _scale_seen_mass(self._mass.reshape(-1, self.facing_sectors), self._coarse.reshape(-1, self.facing_sectors),
+                                   np.ascontiguousarray(cube_index, np.int64), likelihood,
+                                   np.array(self.grid.shape, np.int64), np.array(self.coarse_shape, np.int64),
+                                   self.coarse_factor)
+        left = removed * self._scale
+        self._stored_total -= removed
+        if self._stored_total <= 0:
+            raise ValueError("an observation left no probability anywhere")
+        self._scale = 1.0 / self._stored_total
+        if not 1e-6 < self._scale < 1e6:  # keep stored values in float32's comfortable range
+            self._renormalise()
+        return left
+
+    def mass_near(self, position_m: np.ndarray, radius_m: float) -> float:
+        """Probability that the target's centre lies within ``radius_m`` of ``position_m``."""
+        lo = self.grid.index_of(np.asarray(position_m) - radius_m)
+        hi = self.grid.index_of(np.asarray(position_m) + radius_m) + 1
+        lo, hi = np.clip(lo, 0, self.grid.shape), np.clip(hi, 0, self.grid.shape)
+        box = tuple(slice(a, b) for a, b in zip(lo, hi))
+        centers = self.grid.centers()[box]
+        inside = np.sum((centers - np.asarray(position_m)) ** 2, axis=-1) <= radius_m**2
+        return float(self._mass[box].sum(axis=-1, dtype=np.float64)[inside].sum()) * self._scale
 
     def _renormalise(self) -> None:
         mass = self._mass.astype(np.float64) * self._scale
@@ -154,16 +168,17 @@ class TargetBelief:
 
 
 @numba.njit(cache=True)
-def _remove_seen_mass(mass, coarse, cube_index, detection_prob, shape, coarse_shape, factor):
-    """m(c, k) -= m(c, k) b(c, k) for the seen cubes, mirrored into the coarse blocks; returns Σ m b."""
+def _scale_seen_mass(mass, coarse, cube_index, factor, shape, coarse_shape, factor_coarse):
+    """m(c, k) *= factor(c, k) for the listed cubes, mirrored into the coarse blocks; returns the
+    stored mass that left them, Σ m (1 - factor)."""
     removed_total = 0.0
     plane = shape[1] * shape[2]
     for n in range(cube_index.shape[0]):
         c = cube_index[n]
         i, j, k = c // plane, (c // shape[2]) % shape[1], c % shape[2]
-        block = ((i // factor) * coarse_shape[1] + j // factor) * coarse_shape[2] + k // factor
+        block = ((i // factor_coarse) * coarse_shape[1] + j // factor_coarse) * coarse_shape[2] + k // factor_coarse
         for s in range(mass.shape[1]):
-            kept = np.float64(mass[c, s]) * (1.0 - np.float64(detection_prob[n, s]))
+            kept = np.float64(mass[c, s]) * np.float64(factor[n, s])
             removed = np.float64(mass[c, s]) - kept
             mass[c, s] = kept
             coarse[block, s] -= removed

@@ -15,24 +15,34 @@ The four cost functions of §5.2.1, selected by ``cost_function``:
 4. (eq. 12) ... then maximising covering probability × (1 + A / distance).
 
 "Explore the current position first" is eq. 3: at the current position, take the look of largest
-E(f) = P_Ψ(f) / t(f) while the covering probability stays at or above Θ_move. Eq. 9 is read with
-the detection probability of eq. 1 (Σ p·b), which is what the report's text calls it.
+E(f) = P_Ψ(f) / t(f). When to stop looking here is the ``move_rule``:
+
+- ``"rate"`` (default): while the best look here finds more per second than the best visit
+  elsewhere, travel included — eq. 3 applied over every action, a visit being the best few looks
+  from one position. It needs no threshold, so it holds whether a look rules a place out at once
+  (the report's target that faces the camera) or only for the facings it saw (a one-sided target);
+- ``"threshold"``: the report's rule, while the covering probability here is at least Θ_move.
+
+Eq. 9 is read with the detection probability of eq. 1 (Σ p·b), which is what the report's text
+calls it. Candidate positions are the report's grid vertices plus viewpoints aimed at the belief
+(:mod:`offboard.planning.viewpoints`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
 
-from offboard.planning.action_values import ActionGeometry, ActionValues, CameraSettings, evaluate
-from offboard.planning.belief import TargetBelief
 from offboard.perception.detectability import DetectabilityTable
-from offboard.perception.occupancy import OccupancyGrid
+from offboard.perception.occupancy import FloorMap, OccupancyGrid
+from offboard.planning.action_values import ActionGeometry, ActionValues, CameraSettings, GeometryCache, block_centers, evaluate
+from offboard.planning.belief import TargetBelief
 from offboard.planning.sensed_sphere import SphereBins, sensed_spheres
 from offboard.planning.time_model import TimeModel
+from offboard.planning.viewpoints import aimed_viewpoints, best_distance_m, grid_vertices
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 from shared.strict import bounds
 
@@ -40,11 +50,16 @@ from shared.strict import bounds
 @dataclass(frozen=True)
 class PlannerConfig:
     cost_function: Literal[1, 2, 3, 4] = 3  # the report's best (Tables 2 and 3)
-    move_threshold: float = field(default=0.1, metadata=bounds(0.0, 1.0))  # Θ_move (paper, cost 3: 0.05-0.1 fastest)
+    move_rule: Literal["rate", "threshold"] = "rate"  # when to leave: see the module docstring
+    move_threshold: float = field(default=0.1, metadata=bounds(0.0, 1.0))  # Θ_move of the "threshold" rule
     distance_weight: float = field(default=1.0, metadata=bounds(0.0, 1e3))  # A of eq. 12 (report: 1)
     budget_s: float = field(default=1800.0, metadata=bounds(1.0, 1e6))  # K, robot time
     min_detection_prob: float = field(default=2e-3, metadata=bounds(0.0, 1.0))  # below: not worth a look
-    grid_spacing_m: float = field(default=1.0, metadata=bounds(0.1, 10.0))  # candidate positions
+    grid_spacing_m: float = field(default=1.0, metadata=bounds(0.1, 10.0))  # the report's candidate positions
+    max_vertices: int = field(default=40, metadata=bounds(1, 10_000))  # the grid vertices nearest the robot
+    viewpoints: int = field(default=24, metadata=bounds(0, 1000))  # aimed at the belief, per decision
+    viewpoint_lattice_m: float = field(default=0.25, metadata=bounds(0.05, 2.0))  # they snap to it (cached geometry)
+    visit_looks: int = field(default=4, metadata=bounds(1, 64))  # the most looks a visit is credited with
     tilts_deg: tuple[float, ...] = (0.0, 30.0)  # the report's two tilts
     view_overlap: float = field(default=0.4, metadata=bounds(0.0, 0.9))  # between neighbouring settings
     same_position_m: float = field(default=0.5, metadata=bounds(0.0, 5.0))  # "here" for a candidate
@@ -68,13 +83,6 @@ class Decision:
     setting: int = -1  # index into the planner's camera settings
 
 
-def candidate_positions(room_size_m: tuple[float, float, float], spacing_m: float) -> np.ndarray:
-    """Interior vertices of the floor grid (report §3.3.3): 32 in a 9 × 5 m room at 1 m."""
-    xs = np.arange(spacing_m, room_size_m[0] - 1e-9, spacing_m)
-    ys = np.arange(spacing_m, room_size_m[1] - 1e-9, spacing_m)
-    return np.array([(x, y) for x in xs for y in ys], float)
-
-
 class SearchPlanner:
     def __init__(self, belief: TargetBelief, config: PlannerConfig, table: DetectabilityTable,
                  time_model: TimeModel, intrinsics: Intrinsics, mount: HeadMount):
@@ -86,12 +94,34 @@ class SearchPlanner:
         self.mount = mount
         self.settings = CameraSettings.from_fov(intrinsics, config.tilts_deg, config.view_overlap)
         self.bins = SphereBins()
-        self.positions = candidate_positions(belief.grid.size_m, config.grid_spacing_m)
-        self._candidates = ActionGeometry(belief, self.positions, self.settings, mount, intrinsics, table, self.bins)
+        self.vertices = grid_vertices(belief.grid.size_m, config.grid_spacing_m)
+        self.positions = self.vertices  # the candidates of the coming decision (see plan_positions)
+        self._geometry = GeometryCache(belief, self.settings, mount, intrinsics, table, self.bins,
+                                       config.viewpoint_lattice_m)
+        self._blocks_m = block_centers(belief)
 
     @property
     def action_count(self) -> int:
         return len(self.positions) * len(self.settings)
+
+    def plan_positions(self, pose: Pose2D, floor: FloorMap, margin_m: float) -> np.ndarray:
+        """Choose the candidate positions of the next decision: the grid vertices nearest ``pose``
+        and viewpoints aimed at the belief that the base can stand on (``floor``, ``margin_m`` from
+        the walls). Returns them (also kept as :attr:`positions`)."""
+        near = np.argsort(np.hypot(*(self.vertices - (pose.x_m, pose.y_m)).T))[:self.config.max_vertices]
+        aimed = aimed_viewpoints(self._blocks_m, self.belief.coarse_mass().reshape(len(self._blocks_m), -1),
+                                 self.belief.facing_azimuths_rad, best_distance_m(self.table), self.mount.height_m,
+                                 self.belief.grid.size_m, margin_m, self.config.viewpoint_lattice_m,
+                                 self.config.viewpoints)
+        cells = np.clip(np.floor(aimed / floor.resolution_m).astype(int), 0, np.array(floor.blocked.shape) - 1)
+        aimed = aimed[~floor.blocked[cells[:, 0], cells[:, 1]]] if len(aimed) else aimed
+        self.positions = np.vstack([self.vertices[np.sort(near)], aimed])
+        return self.positions
+
+    def set_processing_s(self, seconds: float) -> None:
+        """The measured processing time of a look (capture transfer, stereo, detection, mapping,
+        planning): part of every t(f) from now on."""
+        self.time_model = replace(self.time_model, processing_s=seconds)
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float,
                occupancy: OccupancyGrid, path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
@@ -116,14 +146,11 @@ class SearchPlanner:
                                     f"{self.config.min_detection_prob:g}", status="exhausted",
                             covering_here=here_covering, values=values)
         if self.config.cost_function == 1:
-            decision = self._eq9(values, look_t, far_t, here_covering)
-        elif here_covering >= self.config.move_threshold and here_detection.max() >= self.config.min_detection_prob:
-            decision = self._look_here(values, look_t, here_covering)
+            decision = self._eq9(values, look_t, far_t, here_covering, pose)
         else:
-            why = (f"covering probability here {here_covering:.3f} < Θ_move {self.config.move_threshold:g}"
-                   if here_covering < self.config.move_threshold else
-                   f"no look left here finds it with probability ≥ {self.config.min_detection_prob:g}")
-            decision = self._move(values, far_t, path_lengths_m, here_covering, pose, why)
+            why, worth = self._why_move(values, look_t, far_t, path_lengths_m, here_covering, pose)
+            decision = (self._look_here(values, look_t, here_covering) if why is None else
+                        self._move(values, far_t, path_lengths_m, here_covering, pose, why, worth))
         if elapsed_s + decision.time_s > self.config.budget_s:
             return Decision("stop", f"the next action ({decision.time_s:.1f} s) would exceed the budget "
                                     f"K = {self.config.budget_s:g} s", status="budget",
@@ -132,11 +159,51 @@ class SearchPlanner:
 
     # --- the pieces --------------------------------------------------------------------------------
 
+    def _why_move(self, values: ActionValues, look_t: np.ndarray, far_t: np.ndarray, path_lengths_m: np.ndarray,
+                  covering: float, pose: Pose2D) -> tuple[str | None, np.ndarray]:
+        """Why to leave the current position (None: look on here), and which candidates are worth
+        going to: those the robot would not leave again at once (the ``move_rule``)."""
+        here = values.detection_prob[-1]
+        if self.config.move_rule == "threshold":
+            worth = values.covering_prob[:-1] >= self.config.move_threshold
+            why = (f"covering probability here {covering:.3f} < Θ_move {self.config.move_threshold:g}"
+                   if covering < self.config.move_threshold else None)
+        else:
+            here_rate = float((here / look_t).max())
+            visit = self._visit_rates(values, far_t, path_lengths_m, pose)
+            worth = visit > here_rate
+            j = int(np.argmax(visit))
+            why = (f"a visit to ({self.positions[j][0]:.2f}, {self.positions[j][1]:.2f}) finds {visit[j]:.4f}/s, "
+                   f"the best look here {here_rate:.4f}/s" if worth[j] else None)
+        if why is None and here.max() < self.config.min_detection_prob:
+            why = f"no look left here finds it with probability ≥ {self.config.min_detection_prob:g}"
+        return why, worth
+
+    def _visit_rates(self, values: ActionValues, far_t: np.ndarray, path_lengths_m: np.ndarray,
+                     pose: Pose2D) -> np.ndarray:
+        """Per candidate: the best detection per second of a visit — travel there, then its best k
+        looks (k ≤ ``visit_looks``), their expected detections summed but capped by the position's
+        covering probability (overlapping views find the same mass once)."""
+        reachable = np.isfinite(np.asarray(path_lengths_m, float)) & np.isfinite(far_t).all(axis=1) & self._away(pose)
+        detection, times = values.detection_prob[:-1][reachable], far_t[reachable]
+        travel = times.min(axis=1) - self.time_model.image_s  # driving there, the first look's slew aside
+        order = np.argsort(-detection, axis=1)[:, :self.config.visit_looks]
+        found = np.minimum(np.cumsum(np.take_along_axis(detection, order, axis=1), axis=1),
+                           values.covering_prob[:-1][reachable, None])
+        spent = travel[:, None] + np.cumsum(np.take_along_axis(times, order, axis=1) - travel[:, None], axis=1)
+        rates = np.zeros(len(self.positions))
+        rates[reachable] = (found / spent).max(axis=1, initial=0.0)
+        return rates
+
+    def _away(self, pose: Pose2D) -> np.ndarray:
+        """Candidates that are somewhere else: farther than ``same_position_m`` from the robot."""
+        return np.hypot(self.positions[:, 0] - pose.x_m, self.positions[:, 1] - pose.y_m) > self.config.same_position_m
+
     def _values(self, pose: Pose2D, occupancy: OccupancyGrid) -> ActionValues:
         near, far = self.table.range_m
         here = np.array([[pose.x_m, pose.y_m]])
-        geometries = (self._candidates, ActionGeometry(self.belief, here, self.settings, self.mount,
-                                                        self.intrinsics, self.table, self.bins))
+        geometries = (self._geometry.rows(self.positions), ActionGeometry(self.belief, here, self.settings, self.mount,
+                                                                          self.intrinsics, self.table, self.bins))
         factor = max(1, round(self.config.sphere_resolution_m / occupancy.grid.resolution_m))
         coarse = occupancy.coarsened(factor)
         rows = []
@@ -169,35 +236,35 @@ class SearchPlanner:
                         self.settings.azimuth_rad[s], self.settings.tilt_rad[s], None, float(detection[s]),
                         float(utility[s]), float(look_t[s]), covering_here=covering, values=values, setting=s)
 
-    def _eq9(self, values: ActionValues, look_t: np.ndarray, far_t: np.ndarray, covering: float) -> Decision:
-        """Cost 1: the largest detection probability among all reachable actions, wherever they are."""
-        far = np.where(np.isfinite(far_t), values.detection_prob[:-1], -1.0)
+    def _eq9(self, values: ActionValues, look_t: np.ndarray, far_t: np.ndarray, covering: float,
+             pose: Pose2D) -> Decision:
+        """Cost 1: the largest detection probability among all reachable actions, wherever they are
+        (a candidate within ``same_position_m`` is here, not a move)."""
+        far = np.where(np.isfinite(far_t) & self._away(pose)[:, None], values.detection_prob[:-1], -1.0)
         here = values.detection_prob[-1]
         if here.max() >= far.max():
             s = int(np.argmax(here))
             return Decision("look", "eq. 9: the best action is here", self.settings.azimuth_rad[s],
                             self.settings.tilt_rad[s], None, float(here[s]), float(here[s]), float(look_t[s]),
                             covering_here=covering, values=values, setting=s)
-        j, s = np.unravel_index(int(np.argmax(far)), far.shape)
+        j, s = (int(v) for v in np.unravel_index(int(np.argmax(far)), far.shape))
         return Decision("move", f"eq. 9: the best action is at ({self.positions[j][0]:g}, {self.positions[j][1]:g})",
                         self.settings.azimuth_rad[s], self.settings.tilt_rad[s], tuple(self.positions[j]),
                         float(far[j, s]), float(far[j, s]), float(far_t[j, s]), covering_here=covering,
-                        values=values)
+                        values=values, setting=s)
 
     def _move(self, values: ActionValues, far_t: np.ndarray, path_lengths_m: np.ndarray, covering: float,
-              pose: Pose2D, why: str) -> Decision:
-        """Eq. 10-12: the next position, preferring those whose covering probability is at least
-        Θ_move (the robot would leave any other at once); its first look is its best by eq. 3."""
+              pose: Pose2D, why: str, worth: np.ndarray) -> Decision:
+        """Eq. 10-12: the next position, preferring those ``worth`` going to (the robot would leave
+        any other at once); its first look is its best by eq. 3."""
         dist = np.asarray(path_lengths_m, float)
-        away = np.hypot(self.positions[:, 0] - pose.x_m, self.positions[:, 1] - pose.y_m) > self.config.same_position_m
-        usable = np.isfinite(dist) & away & (values.detection_prob[:-1].max(axis=1) >= self.config.min_detection_prob)
+        usable = np.isfinite(dist) & self._away(pose) & (values.detection_prob[:-1].max(axis=1) >= self.config.min_detection_prob)
         if not usable.any():
             return Decision("stop", "no reachable position left whose looks are worth taking",
                             status="exhausted", covering_here=covering, values=values)
         cover = values.covering_prob[:-1]
-        worth_staying = usable & (cover >= self.config.move_threshold)
-        if worth_staying.any():  # where the robot would not leave again at once
-            usable = worth_staying
+        if (usable & worth).any():
+            usable = usable & worth
         d = np.maximum(dist, 1e-6)
         score = {2: cover, 3: cover / d, 4: cover * (1.0 + self.config.distance_weight / d)}[self.config.cost_function]
         score = np.where(usable, score, -np.inf)

@@ -56,7 +56,7 @@ def load_hints(path: Path) -> tuple[HintBox, ...]:
     """``[[hint]]`` tables with ``min``, ``max``, ``weight`` and an optional ``name``."""
     try:
         data = tomllib.loads(Path(path).read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:  # ValueError: TOML syntax, bad UTF-8, huge integers
         raise ConfigError(str(path), None, f"cannot read hints: {exc}") from None
     try:
         return build(HintsFile, data, ConfigError).hint

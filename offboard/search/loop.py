@@ -1,7 +1,13 @@
 """The search, end to end: capture → stereo → occupancy → detection → belief → decide → command.
 
-One :class:`Search` drives one robot until the target is found (a weak first detection is
-confirmed by another look), the time budget K is spent, or no reachable action is worth its time.
+One :class:`Search` drives one robot until the target is found — the belief puts at least
+``found_prob`` within ``found_radius_m`` of a detection (a detection is a Bayesian observation,
+:mod:`offboard.planning.detection_model`, so a weak one is confirmed by another look) — the time
+budget K is spent, or no reachable action is worth its time.
+
+Time is honest: every action's motion (robot clock: driving, slewing, capture) and its processing
+(wall clock: capture transfer, stereo, detection, mapping, belief update, planning) are measured
+and reported apart; the planner's t(f) includes the mean processing measured so far.
 The environment is unknown: the planner never reads a world file, only the room's boundary
 (report §3.1: "we assume that boundaries of Ω are known exactly").
 """
@@ -25,6 +31,7 @@ from offboard.planning.belief import TargetBelief
 from offboard.perception.detectability import DetectabilityTable
 from offboard.perception.detection.detector import Detector
 from offboard.planning.detection_function import look_footprint, visible_depth
+from offboard.planning.detection_model import depth_sigma_m, detection_likelihood, located_along_rays, located_at_point
 from offboard.navigation.localization import PoseTracker
 from offboard.navigation.navigator import Navigator
 from offboard.perception.occupancy import OccupancyConfig, OccupancyGrid
@@ -49,8 +56,11 @@ class SearchConfig:
     facing_sectors: int = field(default=8, metadata=bounds(1, 36))  # 1: the target faces the camera
     prob_outside: float = field(default=0.05, metadata=bounds(0.0, 0.99))  # p(c_out) at the start
     detector: Literal["sift", "ncc", "auto"] = "sift"
-    confirm_weak: bool = True  # a weak first detection needs a second look
-    detection_sigma_m: float = field(default=0.1, metadata=bounds(0.01, 2.0))  # belief after a detection
+    found_prob: float = field(default=0.95, metadata=bounds(0.5, 1.0))  # belief near a detection to call it found
+    found_radius_m: float = field(default=0.3, metadata=bounds(0.05, 2.0))  # ... within this of it
+    false_positive_rate: float = field(default=0.005, metadata=bounds(1e-6, 0.5))  # α at least: 0 of 200 negatives
+    weak_false_positive_rate: float = field(default=0.1, metadata=bounds(1e-6, 0.9))  # α of a weak detection
+    detection_sigma_m: float = field(default=0.1, metadata=bounds(0.01, 2.0))  # located centre's error, near
     behind_surface_m: float = field(default=0.12, metadata=bounds(0.0, 1.0))  # target centre behind its face
     max_actions: int = field(default=150, metadata=bounds(1, 10_000))
     planner: PlannerConfig = PlannerConfig()
@@ -78,9 +88,11 @@ class SearchState:
     looks: list[LookTrace] = field(default_factory=list)
     trail: list[tuple[float, float]] = field(default_factory=list)
     estimate_m: np.ndarray | None = None
-    weak_detection: np.ndarray | None = None
-    unreachable: set[int] = field(default_factory=set)
+    unreachable: list[tuple[float, float]] = field(default_factory=list)  # goals the navigator could not reach
     taken: set[int] = field(default_factory=set)  # settings looked at since the robot last moved
+    motion_s: float = 0.0  # robot clock: driving, slewing, capture
+    processing_s: float = 0.0  # wall clock: capture transfer, stereo, detection, mapping, update, planning
+    look_log: list[dict] = field(default_factory=list)  # per look: expected and realised P, times
 
 
 class Search:
@@ -114,6 +126,8 @@ class Search:
         self.state = SearchState()
         self.last_footprint = None
         self._pan_tilt = (math.radians(start.pan_deg), math.radians(start.tilt_deg))
+        self._plans_positions = policy is None  # baselines keep the report's fixed grid
+        self._pending_processing_s = 0.0  # planning done towards the coming look
 
     # --- the loop ------------------------------------------------------------------------------------
 
@@ -124,6 +138,7 @@ class Search:
         self.state.positions.append((pose.x_m, pose.y_m))
         if self.recorder:
             self.recorder.log_setup(self.config.room_m, self.intrinsics, self.mount)
+        self._warm_up()
         while self.state.status == "running":
             if self.state.actions >= self.config.max_actions:
                 self.state.status = "max_actions"
@@ -139,22 +154,47 @@ class Search:
         self.wall_time_s = time.monotonic() - started
         return self.state
 
-    def elapsed_s(self) -> float:
+    def robot_time_s(self) -> float:
         return self.robot.state().robot_time_s - self._clock_start_s
+
+    def elapsed_s(self) -> float:
+        """Time spent so far, as the budget K counts it: robot motion plus measured processing."""
+        return self.robot_time_s() + self.state.processing_s
 
     def _pose(self) -> Pose2D:
         return self.tracker.world_pose(self.robot.state().pose.to_pose())
 
+    def _warm_up(self) -> None:
+        """Compile the planner's and the look's kernels (or load them from numba's cache) before the
+        search starts, so that the first decision costs what every other one does."""
+        started = time.perf_counter()
+        self._choose(self._pose())
+        camera = self.mount.camera_in_world(self._pose(), *self._pan_tilt)
+        table = self._planning_table()
+        depth = visible_depth(None, self.occupancy, camera, self.intrinsics, self.mount.baseline_m, 16, table.range_m[1])
+        look_footprint(self.occupancy.grid, camera, self.intrinsics, depth, 16, table, self.belief.facing_azimuths_rad,
+                       self.config.behind_surface_m)
+        log.info("planner ready in %.0f ms", (time.perf_counter() - started) * 1000.0)
+
+    def _choose(self, pose: Pose2D) -> Decision:
+        """The policy's next action from ``pose``, on the current maps."""
+        floor = self.navigator.floor_map()  # the navigator's clearance: a path here is one it drives
+        if self._plans_positions:
+            self.planner.plan_positions(pose, floor, self.info.base.radius_m + 0.05)
+        field_m = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
+        paths = grid_planner.distances_at(floor, field_m, self.planner.positions)
+        for goal in self.state.unreachable:
+            paths[np.hypot(*(self.planner.positions - goal).T) < self.config.planner.same_position_m] = np.inf
+        return self.policy.decide(pose, *self._pan_tilt, self.elapsed_s(), self.occupancy, paths,
+                                  frozenset(self.state.taken))
+
     def _decide(self) -> Decision:
         pose = self._pose()
         started = time.perf_counter()
-        floor = self.navigator.floor_map()  # the navigator's clearance: a path here is one it drives
-        field_m = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
-        paths = grid_planner.distances_at(floor, field_m, self.planner.positions)
-        paths[list(self.state.unreachable)] = np.inf
-        decision = self.policy.decide(pose, *self._pan_tilt, self.elapsed_s(), self.occupancy, paths,
-                                      frozenset(self.state.taken))
-        self.state.planning_ms.append((time.perf_counter() - started) * 1000.0)
+        decision = self._choose(pose)
+        planning_s = time.perf_counter() - started
+        self.state.planning_ms.append(planning_s * 1000.0)
+        self._pending_processing_s += planning_s
         log.info("decision %d: %s — %s (P=%.3f, t=%.1f s)", len(self.state.planning_ms), decision.kind,
                  decision.reason, decision.detection_prob, decision.time_s)
         if self.recorder and decision.values is not None:
@@ -164,7 +204,9 @@ class Search:
 
     def _move(self, decision: Decision) -> None:
         goal = decision.position_m
+        before = self.robot_time_s()
         result = self.navigator.go_to(goal)
+        self.state.motion_s += self.robot_time_s() - before
         self.state.taken.clear()
         self.state.distance_m += result.distance_m
         self.state.trail.append((result.pose.x_m, result.pose.y_m))
@@ -172,24 +214,29 @@ class Search:
             self.state.positions.append((result.pose.x_m, result.pose.y_m))
             self._look(decision)  # the look the move was chosen for
         else:
-            index = int(np.argmin(np.hypot(*(self.planner.positions - np.array(goal)).T)))
-            self.state.unreachable.add(index)
+            self.state.unreachable.append(tuple(goal))
             log.warning("position (%.1f, %.1f) not reached: %s (%s)", goal[0], goal[1], result.status, result.reason)
 
     def _look(self, decision: Decision) -> None:
         pose = self._pose()
+        before = self.robot_time_s()
         plan = self.time_model.look(pose.heading_rad, *self._pan_tilt, decision.azimuth_rad, decision.tilt_rad)
         if abs(plan.base_turn_rad) > 1e-3:
             self.robot.move(turn_deg=math.degrees(plan.base_turn_rad))
         self.robot.look(math.degrees(plan.pan_rad), math.degrees(plan.tilt_rad))
         self._pan_tilt = (plan.pan_rad, plan.tilt_rad)
+        started = time.perf_counter()
         capture = self.robot.capture()
-        self.last_footprint = None
+        motion_s = self.robot_time_s() - before
         name, (detector, table) = self._choose_detector(decision)
         obs = self.perception.observe(capture, self.tracker.world_pose(capture.pose.to_pose()), detector)
         self.state.actions += 1
         self.state.taken.add(decision.setting)
-        found = self._interpret(obs, table)
+        realised, found = self._interpret(obs, table)
+        if obs.detection is not None:
+            self.state.taken.discard(decision.setting)  # a detection is worth confirming from the same view
+        processing_s = self._pending_processing_s + time.perf_counter() - started  # the wall clock's part
+        self._account(decision, obs, realised, motion_s, processing_s)
         self.state.looks.append(LookTrace(obs.pose.x_m, obs.pose.y_m, decision.azimuth_rad,
                                           math.degrees(decision.tilt_rad), table.range_m[1], found))
         for prior in self.dynamic_priors:
@@ -198,30 +245,65 @@ class Search:
                 self.belief.reweight(factor)
         self._record(obs, table)
 
-    def _interpret(self, obs: Observation, table: DetectabilityTable) -> bool:
-        """Found, or concentrate on a weak detection, or eq. 4 after a miss."""
-        if obs.detection is not None and obs.target_m is not None:
-            obs = self._to_target_centre(obs)
-            confirmed = (self.state.weak_detection is not None
-                         and np.linalg.norm(obs.target_m - self.state.weak_detection) < 0.3)
-            self.belief.concentrate(obs.target_m, self.config.detection_sigma_m)
-            self.state.estimate_m = obs.target_m
-            if obs.detection.confident or confirmed or not self.config.confirm_weak:
-                self.state.status, self.state.found = "found", True
-                log.info("target found at %s", np.round(obs.target_m, 2))
-                return True
-            self.state.weak_detection = obs.target_m
-            log.info("weak detection at %s: looking again to confirm", np.round(obs.target_m, 2))
-            return False
+    def _account(self, decision: Decision, obs: Observation, realised: float, motion_s: float,
+                 processing_s: float) -> None:
+        """Book the look's times (the planner's t(f) takes the mean processing from now on) and log
+        what the planner expected of it beside what the exact update found."""
+        s = self.state
+        s.motion_s += motion_s
+        s.processing_s += processing_s
+        self._pending_processing_s = 0.0
+        self.planner.set_processing_s(s.processing_s / s.actions)
+        s.look_log.append({"action": s.actions, "expected_p": round(float(decision.detection_prob), 6),
+                           "realised_p": round(float(realised), 6), "detected": obs.detection is not None,
+                           "processing_s": round(processing_s, 4), "motion_s": round(motion_s, 4),
+                           "x_m": round(obs.pose.x_m, 3), "y_m": round(obs.pose.y_m, 3), "setting": decision.setting})
+
+    def _interpret(self, obs: Observation, table: DetectabilityTable) -> tuple[float, bool]:
+        """Bayes on what the look saw: eq. 4 after a miss, the detection model after a detection.
+        Returns the look's realised detection probability (eq. 1 over what it actually saw, before the
+        update) and whether the target now counts as found."""
         near, far = table.range_m
         depth = visible_depth(obs.disparity, self.occupancy, obs.camera_in_world, obs.intrinsics,
                               obs.baseline_m, 16, far)
         footprint = look_footprint(self.occupancy.grid, obs.camera_in_world, obs.intrinsics, depth, 16, table,
                                    self.belief.facing_azimuths_rad, self.config.behind_surface_m)
         self.last_footprint = footprint
-        found_prob = self.belief.update_after_miss(footprint.cube_index, footprint.detection_prob)
-        log.info("look %d: no target; it could have found it with probability %.3f; P[F] = %.3f",
-                 self.state.actions, found_prob, self.belief.success_prob)
+        if obs.detection is None:
+            realised = self.belief.update_after_miss(footprint.cube_index, footprint.detection_prob)
+            log.info("look %d: no target; it could have found it with probability %.3f; P[F] = %.3f",
+                     self.state.actions, realised, self.belief.success_prob)
+            return realised, False
+        realised = self.belief.expected_detection(footprint.cube_index, footprint.detection_prob)
+        return realised, self._detected(obs, table, footprint)
+
+    def _detected(self, obs: Observation, table: DetectabilityTable, footprint) -> bool:
+        """Fold a detection into the belief; found once the belief is sure enough near it."""
+        grid, confident = self.occupancy.grid, obs.detection.confident
+        alpha = max(table.false_positive_rate, self.config.false_positive_rate if confident
+                    else self.config.weak_false_positive_rate)
+        if obs.target_m is not None:
+            obs = self._to_target_centre(obs)
+            distance = float(np.linalg.norm(obs.target_m - obs.camera_in_world.translation))
+            sigma = depth_sigma_m(distance, obs.intrinsics, obs.baseline_m, self.config.detection_sigma_m)
+            located = located_at_point(grid, footprint.cube_index, obs.target_m, sigma)
+        else:
+            located = located_along_rays(grid, footprint.cube_index, obs.detection.box_px, obs.camera_in_world,
+                                         obs.intrinsics)
+        self.belief.observe(footprint.cube_index, detection_likelihood(
+            grid, footprint.cube_index, footprint.detection_prob, located, alpha))
+        if obs.target_m is None:
+            log.info("%s detection without stereo depth: the belief gathers along its rays", obs.detection.detector)
+            return False
+        near = self.belief.mass_near(obs.target_m, self.config.found_radius_m)
+        self.state.estimate_m = obs.target_m
+        if near >= self.config.found_prob:
+            self.state.status, self.state.found = "found", True
+            log.info("target found at %s (P within %.2f m: %.3f)", np.round(obs.target_m, 2),
+                     self.config.found_radius_m, near)
+            return True
+        log.info("%s detection at %s: P within %.2f m is %.3f < %.2f; looking on", "confident" if confident else "weak",
+                 np.round(obs.target_m, 2), self.config.found_radius_m, near, self.config.found_prob)
         return False
 
     def _to_target_centre(self, obs: Observation) -> Observation:
@@ -257,7 +339,7 @@ class Search:
         if not self.recorder:
             return
         r = self.recorder
-        r.set_time(self.state.actions, self.elapsed_s())
+        r.set_time(self.state.actions, self.robot_time_s())
         r.log_pose(obs.pose, math.radians(obs.capture.pan_deg), math.radians(obs.capture.tilt_deg), self.mount)
         r.log_observation(obs, table.range_m[1])
         r.log_maps(self.belief, self.occupancy)
@@ -278,7 +360,9 @@ class Search:
             "actions": s.actions,
             "positions_visited": len(s.positions),
             "distance_m": round(s.distance_m, 3),
-            "robot_time_s": round(self.elapsed_s(), 3),
+            "robot_time_s": round(self.robot_time_s(), 3),
+            "motion_time_s": round(s.motion_s, 3),
+            "processing_time_s": round(s.processing_s, 3),
             "wall_time_s": round(getattr(self, "wall_time_s", 0.0), 3),
             "planning_ms_p50": round(float(np.percentile(ms, 50)), 2),
             "planning_ms_p95": round(float(np.percentile(ms, 95)), 2),
@@ -295,7 +379,7 @@ class Search:
         s = self.state
         floor = self.occupancy.floor_map(self.info.base.radius_m, self.info.base.height_m)
         title = (f"{s.status}: {s.actions} looks, {len(s.positions)} positions, {s.distance_m:.1f} m, "
-                 f"{self.elapsed_s() / 60:.1f} min robot time")
+                 f"{self.robot_time_s() / 60:.1f} min robot time")
         draw_top_view(path, self.config.room_m, floor, s.trail, s.looks, self.intrinsics.hfov_rad, s.estimate_m, title)
 
 

@@ -127,6 +127,7 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
                 robot.stop()
             summary = {**search.summary(), "prior": "+".join(request.priors)}
             search.write_top_view(out / "search.png")
+            (out / "looks.jsonl").write_text("".join(json.dumps(look) + "\n" for look in search.state.look_log))
         (out / "summary.json").write_text(json.dumps(summary, indent=2))
         log.info("summary: %s", summary)
         return summary

@@ -92,12 +92,26 @@ def test_a_second_look_from_the_same_side_is_worth_less_than_one_from_a_new_side
     assert first > 0 and new_side > again_same
 
 
-def test_concentrate_puts_the_mass_at_a_detection():
-    belief = TargetBelief(GRID)
-    belief.concentrate(np.array([1.0, 0.5, 0.25]), sigma_m=0.1)
-    p = belief.target_prob
-    assert belief.prob_outside == 0.0 and p.sum() == pytest.approx(1.0)
-    assert tuple(np.unravel_index(p.argmax(), p.shape)) in {(i, j, k) for i in (9, 10) for j in (4, 5) for k in (1, 2)}
+def test_observe_is_bayes_with_a_likelihood_per_listed_cube():
+    belief = TargetBelief(GRID, facing_sectors=2, prob_outside=0.2)
+    cubes = np.arange(10)
+    before = belief.mass_by_facing().reshape(-1, 2)[cubes].sum()
+    likelihood = np.full((10, 2), 3.0)
+    belief.observe(cubes, likelihood)
+    after = belief.mass_by_facing().reshape(-1, 2)[cubes].sum()
+    rest = 1.0 - before  # every other cube and c_out keep their relative weight (factor 1)
+    assert after == pytest.approx(3 * before / (3 * before + rest))
+    assert belief.prob_outside == pytest.approx(0.2 / (3 * before + rest))
+    with pytest.raises(ValueError, match="non-negative"):
+        belief.observe(cubes, -likelihood)
+
+
+def test_mass_near_counts_the_ball_around_a_point():
+    belief = TargetBelief(GRID, facing_sectors=1, prob_outside=0.0)
+    whole = belief.mass_near(np.array([1.0, 0.5, 0.25]), 10.0)
+    assert whole == pytest.approx(1.0)
+    small = belief.mass_near(np.array([1.0, 0.5, 0.25]), 0.1)
+    assert 0 < small < 0.05
 
 
 ROOM = VoxelGrid((4.0, 3.0, 2.5), 0.05)

@@ -11,7 +11,8 @@ from offboard.planning.belief import TargetBelief
 from offboard.perception.detectability import DetectabilityTable
 from offboard.planning.detection_function import look_footprint, visible_depth
 from offboard.perception.occupancy import OccupancyGrid
-from offboard.planning.planner import PlannerConfig, SearchPlanner, candidate_positions
+from offboard.planning.planner import PlannerConfig, SearchPlanner
+from offboard.planning.viewpoints import grid_vertices
 from offboard.planning.priors import HintBox, hints
 from offboard.planning.time_model import TimeModel
 from offboard.perception.voxel_grid import VoxelGrid
@@ -57,7 +58,7 @@ def test_each_cost_function_picks_what_its_equation_says(cost, near):
 def test_the_paper_lab_has_544_actions():
     belief = TargetBelief(VoxelGrid((9.0, 5.0, 2.5), 0.05))
     planner = SearchPlanner(belief, PlannerConfig(), DetectabilityTable.nominal(), TIME, K, MOUNT)
-    assert len(candidate_positions((9.0, 5.0, 2.5), 1.0)) == 32 and len(planner.settings) == 17
+    assert len(grid_vertices((9.0, 5.0, 2.5), 1.0)) == 32 and len(planner.settings) == 17
     assert planner.action_count == 544
 
 
@@ -104,12 +105,14 @@ def test_a_place_nothing_has_looked_at_keeps_its_probability():
     assert belief.target_prob[tuple(middle)] < before_corner  # what was seen lost
 
 
-def test_the_robot_moves_once_the_covering_probability_drops_below_the_threshold():
-    planner = _planner(3, boxes=(HintBox((1.8, 2.6, 0.9), (2.2, 3.0, 1.2), 0.5),), move_threshold=0.3)
+def test_the_threshold_rule_moves_once_the_covering_probability_drops_below_theta_move():
+    planner = _planner(3, boxes=(HintBox((1.8, 2.6, 0.9), (2.2, 3.0, 1.2), 0.5),), move_threshold=0.3,
+                       move_rule="threshold")
     pose = Pose2D(2.0, 1.5, 0.0)
     d = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose))
     assert d.kind == "look" and d.covering_here >= 0.3
-    higher = _planner(3, boxes=(HintBox((1.8, 2.6, 0.9), (2.2, 3.0, 1.2), 0.5),), move_threshold=0.95)
+    higher = _planner(3, boxes=(HintBox((1.8, 2.6, 0.9), (2.2, 3.0, 1.2), 0.5),), move_threshold=0.95,
+                      move_rule="threshold")
     d2 = higher.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(higher, pose))
     assert d2.kind == "move" and "Θ_move" in d2.reason
 
@@ -131,3 +134,59 @@ def test_unreachable_positions_are_never_chosen():
     paths[near_a] = np.inf
     d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), paths)
     assert d.kind == "move" and np.hypot(*(np.array(d.position_m) - a_center)) >= 1.5
+
+
+def test_the_rate_rule_looks_here_while_a_look_here_beats_any_visit_elsewhere():
+    box = HintBox((1.8, 2.6, 0.9), (2.2, 3.0, 1.2), 0.5)  # 1.3 m in front of the pose: one look finds it
+    planner = _planner(3, boxes=(box,))
+    pose = Pose2D(2.0, 1.5, math.pi / 2)
+    d = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose))
+    assert d.kind == "look" and d.detection_prob > 0.3, d.reason
+    # the same mass far away (4.5, 2.5) is worth the drive: nothing here can see it
+    far = _planner(3, boxes=(A_BOX,))
+    d2 = far.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(far, pose))
+    assert d2.kind == "move" and "a visit to" in d2.reason and d2.position_m[0] > 3.5
+
+
+def test_a_look_here_is_left_for_a_visit_that_finds_more_per_second_travel_included():
+    # a little mass here, a lot 1 m away: the visit's rate (travel included) wins over the look here
+    planner = _planner(3, boxes=(HintBox((1.9, 2.4, 1.1), (2.1, 2.6, 1.3), 0.02), HintBox((3.4, 2.4, 1.1), (3.6, 2.6, 1.3), 0.98)))
+    pose = Pose2D(2.0, 1.5, math.pi / 2)
+    d = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose))
+    assert d.kind == "move", d.reason
+
+
+def test_cost_1_moves_carry_their_setting_and_never_to_where_the_robot_stands():
+    planner = _planner(1)
+    d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))
+    assert d.kind == "move" and 0 <= d.setting < len(planner.settings)
+    assert d.detection_prob == pytest.approx(d.values.detection_prob[:-1].max())
+    at_vertex = Pose2D(1.0, 1.0, 0.0)  # the robot stands on a candidate: that one is "here", not a move
+    d2 = planner.decide(at_vertex, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, at_vertex))
+    assert d2.kind == "look" or np.hypot(d2.position_m[0] - 1.0, d2.position_m[1] - 1.0) > 0.5
+
+
+def test_viewpoints_are_aimed_at_the_unseen_facing_of_a_mass():
+    from offboard.planning.viewpoints import aimed_viewpoints
+
+    blocks = np.array([[4.0, 2.0, 1.0], [1.0, 1.0, 1.0]])
+    mass = np.zeros((2, 8))
+    mass[0, 2] = 0.9  # the first block's mass faces +y (sector 2 of 8 is 90°)
+    mass[1, 0] = 0.1
+    facings = np.arange(8) * (2 * math.pi / 8)
+    points = aimed_viewpoints(blocks, mass, facings, 1.2, 1.2, (6.0, 4.0, 2.5), 0.3, 0.25, 2)
+    assert points.shape == (2, 2)
+    np.testing.assert_allclose(points[0], (4.0, 3.25), atol=0.13)  # straight in front of its face, 1.2 m
+    np.testing.assert_allclose(points[1], (2.25, 1.0), atol=0.13)
+
+
+def test_planned_positions_add_viewpoints_the_base_can_stand_on():
+    planner = _planner(3, boxes=(B_BOX,))
+    floor = OccupancyGrid(ROOM).floor_map(0.26, 1.35)
+    positions = planner.plan_positions(START, floor, 0.3)
+    assert len(positions) > len(planner.vertices) and len(planner.positions) == len(positions)
+    aimed = positions[len(planner.vertices):]
+    box_center = np.array([2.5, 1.5])
+    assert np.hypot(*(aimed[0] - box_center)) < 1.0  # the strongest faces the box
+    d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))
+    assert d.kind == "move" and np.hypot(*(np.array(d.position_m) - box_center)) < 1.6

@@ -1,0 +1,97 @@
+"""A detection is a Bayesian observation: it concentrates the belief, a false one can be recovered
+from, a weak detector concentrates less, and a detection without depth gathers mass along its rays."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from offboard.perception.detectability import DetectabilityTable
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.perception.voxel_grid import VoxelGrid
+from offboard.planning.belief import TargetBelief
+from offboard.planning.detection_function import look_footprint, visible_depth
+from offboard.planning.detection_model import (depth_sigma_m, detection_likelihood, located_along_rays,
+                                               located_at_point)
+from shared.geometry import HeadMount, Intrinsics, Pose2D
+
+K = Intrinsics.from_fov(640, 480, 66.0)
+ROOM = VoxelGrid((4.0, 3.0, 2.5), 0.05)
+CAMERA = HeadMount().camera_in_world(Pose2D(0.5, 1.5, 0.0), 0.0, 0.0)  # looks along +x at 1.2 m
+TARGET = np.array([2.0, 1.5, 1.2])
+
+
+def _look(belief: TargetBelief):
+    table = DetectabilityTable.nominal(near_m=0.4, far_m=3.0)
+    depth = visible_depth(None, OccupancyGrid(ROOM), CAMERA, K, 0.12, 16, 3.0)
+    return look_footprint(ROOM, CAMERA, K, depth, 16, table, belief.facing_azimuths_rad, 0.1)
+
+
+def _detect(belief: TargetBelief, at: np.ndarray, alpha: float) -> None:
+    fp = _look(belief)
+    located = located_at_point(ROOM, fp.cube_index, at, 0.1)
+    belief.observe(fp.cube_index, detection_likelihood(ROOM, fp.cube_index, fp.detection_prob, located, alpha))
+
+
+def test_a_confident_detection_concentrates_the_belief_around_it():
+    belief = TargetBelief(ROOM, facing_sectors=1, prob_outside=0.05)
+    _detect(belief, TARGET, 0.005)
+    assert belief.mass_near(TARGET, 0.3) > 0.95
+    assert belief.prob_outside < 0.01
+
+
+def test_a_weak_detector_concentrates_less_and_two_detections_more_than_one():
+    weak = TargetBelief(ROOM, facing_sectors=1)
+    _detect(weak, TARGET, 0.5)
+    strong = TargetBelief(ROOM, facing_sectors=1)
+    _detect(strong, TARGET, 0.005)
+    assert weak.mass_near(TARGET, 0.3) < strong.mass_near(TARGET, 0.3)
+    once = weak.mass_near(TARGET, 0.3)
+    _detect(weak, TARGET, 0.5)
+    assert weak.mass_near(TARGET, 0.3) > once
+
+
+def test_a_false_detection_can_be_recovered_from():
+    belief = TargetBelief(ROOM, facing_sectors=1)
+    _detect(belief, TARGET, 0.1)
+    fooled = belief.mass_near(TARGET, 0.3)
+    fp = _look(belief)
+    for _ in range(4):  # the same view, seen again and again without the detector firing
+        belief.update_after_miss(fp.cube_index, fp.detection_prob)
+    assert belief.mass_near(TARGET, 0.3) < 0.1 * fooled
+    assert belief.prob_outside > 0  # c_out was never wiped out
+
+
+def test_a_detection_far_from_any_seen_cube_explains_nothing():
+    belief = TargetBelief(ROOM, facing_sectors=1)
+    fp = _look(belief)
+    located = located_at_point(ROOM, fp.cube_index, np.array([0.2, 0.2, 0.2]), 0.1)  # behind the camera
+    assert located.sum() == 0
+    ratio = detection_likelihood(ROOM, fp.cube_index, fp.detection_prob, located, 0.01)
+    np.testing.assert_allclose(ratio, 1.0 - fp.detection_prob)  # as if it had missed
+
+
+def test_without_depth_the_mass_gathers_along_the_detected_rays():
+    belief = TargetBelief(ROOM, facing_sectors=1)
+    fp = _look(belief)
+    box = (300.0, 220.0, 340.0, 260.0)  # the image centre: the ray straight ahead
+    located = located_along_rays(ROOM, fp.cube_index, box, CAMERA, K)
+    assert located.sum() == pytest.approx(1.0)
+    belief.observe(fp.cube_index, detection_likelihood(ROOM, fp.cube_index, fp.detection_prob, located, 0.005))
+    on_ray = sum(belief.mass_near(np.array([x, 1.5, 1.2]), 0.15) for x in np.arange(1.0, 3.5, 0.25))
+    assert on_ray > 0.6  # along the ray, at every depth
+    assert belief.mass_near(TARGET, 0.3) < 0.5  # but nowhere in particular
+
+
+def test_depth_uncertainty_grows_with_distance():
+    near = depth_sigma_m(1.0, K, 0.12, 0.1)
+    far = depth_sigma_m(5.0, K, 0.12, 0.1)
+    assert near == pytest.approx(0.1, abs=0.01) and far > 0.2
+    assert math.isfinite(far)
+
+
+def test_no_detector_is_infallible():
+    with pytest.raises(ValueError, match="positive"):
+        detection_likelihood(ROOM, np.arange(3), np.zeros((3, 1)), np.ones(3) / 3, 0.0)
