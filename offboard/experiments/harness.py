@@ -71,7 +71,7 @@ class Run:
     start: Start
     target: Placement
     cost: int | None  # None for baselines (the cost function is SYT's)
-    prior: str  # "uniform" or "tables"
+    prior: str  # one of PRIORS
     seed: int
 
     def fields(self) -> dict[str, str]:
@@ -125,7 +125,7 @@ def make_row(run: Run, world: WorldFacts, summary: dict | None, run_wall_s: floa
     """A results.csv row: the run, its summary (``None`` if it crashed), the estimate's error, SPL."""
     truth = world.truth(run.target)
     _, shortest = viewpoint(truth, run.start[:2])
-    row = {**run.fields(), "key": run.key, "run_wall_s": round(run_wall_s, 2),
+    row = {**run.fields(), "key": run.key, "run_wall_s": round(run_wall_s, 2), "run_dir": f"runs/{run.slug}",
            "shortest_path_m": round(shortest, 3) if math.isfinite(shortest) else ""}
     if summary is None:
         return {**row, "found": False, "status": f"error: {error}"[:300], "success": False, "spl": 0.0, "error": error}
@@ -354,7 +354,7 @@ def _prepare(runs: list[Run], out: Path) -> dict[str, tuple[WorldFacts, Path, Pa
             subprocess.run([sys.executable, "-m", "onboard.cli", "picture", Path(world.target_picture).stem,
                             "--out", str(picture)], check=True, capture_output=True)
         hint_file = hints / f"{world.name}-tables.toml"
-        if world.tables():
+        if world.knowledge_surfaces():
             hint_file.write_text(tables_hints(world))
         prepared[name] = (world, picture, hint_file)
     return prepared
@@ -365,7 +365,7 @@ def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Worker
     run_dir = settings.out / "runs" / run.slug
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "summary.json").unlink(missing_ok=True)  # a leftover of an interrupted attempt
-    prior = "uniform" if run.prior == "uniform" else f"hints:{hint_file}"
+    prior = f"hints:{hint_file}" if run.prior == "tables" else run.prior  # the others are search --prior kinds
     spec = WorkerSpec(asdict(run), str(world.path), str(picture), prior, settings.budget_s, str(run_dir),
                       settings.move_threshold, None if settings.config_path is None else str(settings.config_path))
     (run_dir / "spec.json").write_text(json.dumps(asdict(spec), indent=2))
@@ -413,7 +413,9 @@ def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progr
 # --- the command line ------------------------------------------------------------------------------
 
 PRESETS = {"paper": PAPER}
-PRIORS = ("uniform", "tables")
+# tables: the knowledge prior (hints above the surfaces targets stand on); surfaces, saliency: search --prior
+# kinds that need no given knowledge (report §3.4 types 2 and 4)
+PRIORS = ("uniform", "tables", "surfaces", "saliency")
 
 
 def _list(kind: type, allowed: tuple | None = None):
@@ -438,7 +440,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--worlds", type=_list(str), metavar="W,..",
                         help="bundled world names, world files or suites (dev, test)")
     parser.add_argument("--costs", type=_list(int, (1, 2, 3, 4)), metavar="C,..")
-    parser.add_argument("--priors", type=_list(str, PRIORS), metavar="P,..", help="uniform, tables")
+    parser.add_argument("--priors", type=_list(str, PRIORS), metavar="P,..", help=", ".join(PRIORS))
     parser.add_argument("--seeds", type=_list(int), metavar="S,..", help="simulator seeds (and the random baseline's)")
     parser.add_argument("--methods", type=_list(str, ("syt", *BASELINE_METHODS)), metavar="M,..",
                         help=f"syt, {', '.join(BASELINE_METHODS)}")

@@ -7,20 +7,25 @@
   closest one: SPL's shortest path, and where the oracle baseline drives;
 - :func:`target_placements`, :func:`robot_starts`: the report's Fig. 5 setup derived from any world
   (targets on its tables facing open floor, starts spread around the room);
-- :func:`tables_hints`: the ``tables`` prior as a hints file for ``--prior hints:FILE``.
+- :func:`tables_hints`: the ``tables`` (knowledge) prior as a hints file for ``--prior hints:FILE``.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from offboard.navigation import grid_planner
+from offboard.perception.detectability import DetectabilityTable, facing_angle_deg
 from offboard.perception.occupancy import FloorMap
+from shared.geometry import HeadMount
+from shared.limits import PanTiltLimits
 from shared.strict import bounds
 from shared.world import Box, load_world, resolve_world, suite_of
 
@@ -29,6 +34,7 @@ Start = tuple[float, float, float]  # x, y, heading° (the agent's --start)
 Placement = tuple[float, float, float, float]  # x, y, z of the bottom centre, yaw° (the agent's --target)
 TABLE_KINDS = ("table", "desk")  # the surfaces of the "tables" prior and of the target placements
 DRIVE_CLEARANCE_M = 0.31  # what the navigator keeps from obstacles: the robot's radius 0.26 + its margin 0.05
+ARRIVAL_MARGIN_M = 0.25  # how far from where it was sent a robot may stop (the oracle's "arrived")
 
 
 # --- the truth -------------------------------------------------------------------------------------
@@ -49,23 +55,89 @@ class Truth:
     target_yaw_deg: float  # the direction its picture faces, 0 = +x, counter-clockwise
     target_depth_m: float = 0.23  # the picture is half this in front of the centre
     target_sides: int = 1  # pictured vertical faces: 1, or 4 (yaw and every quarter turn from it)
+    target_height_m: float = 0.23  # the picture's height
+    target_width_m: float = 0.23  # and width
 
     def face_normals(self) -> list[np.ndarray]:
         yaws = [math.radians(self.target_yaw_deg + 90.0 * k) for k in range(self.target_sides)]
         return [np.array([math.cos(yaw), math.sin(yaw)]) for yaw in yaws]
 
+    def face_centre(self, normal: np.ndarray) -> np.ndarray:
+        """The 3D centre of the picture whose horizontal normal is ``normal``."""
+        x, y, z = self.target_center_m
+        half = self.target_depth_m / 2
+        return np.array([x + normal[0] * half, y + normal[1] * half, z])
+
+    def picture_points(self, normal: np.ndarray, inset: float = 0.9) -> np.ndarray:
+        """The picture's centre and its corners drawn in by ``inset`` (5, 3): what must be in plain view
+        (the bottom corners then clear the surface the target stands on)."""
+        centre = self.face_centre(normal)
+        across = np.array([-normal[1], normal[0], 0.0]) * self.target_width_m / 2 * inset
+        up = np.array([0.0, 0.0, self.target_height_m / 2 * inset])
+        return np.array([centre] + [centre + a * across + b * up for a in (-1, 1) for b in (-1, 1)])
+
+
+@functools.cache
+def detector_table(detector: str = "sift") -> DetectabilityTable:
+    """The detectability table shipped for ``detector``: the one the searches of the bundled target load."""
+    shipped = resources.files("offboard.perception.detection") / "tables" / f"{detector}.json"
+    return DetectabilityTable.load(Path(str(shipped)))
+
 
 @dataclass(frozen=True)
 class SeeingCriteria:
-    """When a floor position "sees" the target: in range of its face, in front of it, nothing between."""
+    """When a floor position "sees" the target: with the camera aimed at the picture as well as the
+    tilt limits allow, the detector's measured rate (by distance, angle off the optical axis and angle
+    off the picture's normal) is at least ``min_rate``, the whole picture fits in the image, and no
+    obstacle crosses the lines from the camera to the picture's centre and corners. The range, the nearest distance
+    and the widest angle off the normal follow from the table (:attr:`range_m`, :attr:`near_m`,
+    :attr:`max_off_normal_deg`)."""
 
-    range_m: float = field(default=2.5, metadata=bounds(0.1, 20.0))  # the detector's useful range
-    near_m: float = field(default=0.5, metadata=bounds(0.0, 5.0))  # closer, the face overflows the image
-    max_off_normal_deg: float = field(default=60.0, metadata=bounds(0.0, 90.0))
+    table: DetectabilityTable = field(default_factory=detector_table, compare=False)
+    min_rate: float = field(default=0.8, metadata=bounds(0.0, 1.0))  # "the detector reliably finds it"
     robot_radius_m: float = field(default=0.26, metadata=bounds(0.05, 2.0))
     robot_height_m: float = field(default=1.35, metadata=bounds(0.1, 3.0))  # lower obstacles block the base
-    camera_height_m: float = field(default=1.2, metadata=bounds(0.1, 3.0))
+    camera_height_m: float = field(default=HeadMount().height_m, metadata=bounds(0.1, 3.0))  # the tilt axis
+    tilt_min_deg: float = field(default=PanTiltLimits().tilt_min_deg, metadata=bounds(-90.0, 0.0))
+    tilt_max_deg: float = field(default=PanTiltLimits().tilt_max_deg, metadata=bounds(0.0, 90.0))
+    vertical_half_fov_deg: float = field(default=26.0, metadata=bounds(1.0, 89.0))  # 640 × 480 at 66° across
     resolution_m: float = field(default=0.05, metadata=bounds(0.01, 0.5))
+
+    def _reliable_bins(self, axis: int) -> np.ndarray:
+        """Bins along ``axis`` of the table (0: distance, 2: off the normal) with a cell ≥ ``min_rate``."""
+        return np.nonzero(self.table.rate.max(axis=tuple(a for a in range(3) if a != axis)) >= self.min_rate)[0]
+
+    @property
+    def range_m(self) -> float:
+        """The farthest distance at which the detector reliably finds the target (0: nowhere)."""
+        bins = self._reliable_bins(0)
+        return float(self.table.distance_edges_m[bins[-1] + 1]) if bins.size else 0.0
+
+    @property
+    def near_m(self) -> float:
+        bins = self._reliable_bins(0)
+        return float(self.table.distance_edges_m[bins[0]]) if bins.size else 0.0
+
+    @property
+    def max_off_normal_deg(self) -> float:
+        bins = self._reliable_bins(2)
+        return float(self.table.facing_edges_deg[bins[-1] + 1]) if bins.size else 0.0
+
+    def rate(self, camera_xy: np.ndarray, face: np.ndarray, normal: np.ndarray, picture_height_m: float) -> np.ndarray:
+        """The detector's rate from cameras at ``camera_xy`` (n, 2) on the picture centred at ``face``
+        (3D) facing ``normal``, the camera aimed at it as well as the tilt limits allow; 0 where the
+        picture does not fit in the image."""
+        to_face = face[:2] - camera_xy
+        flat_m = np.hypot(to_face[:, 0], to_face[:, 1])
+        rise_m = face[2] - self.camera_height_m
+        distance = np.hypot(flat_m, rise_m)
+        elevation = np.degrees(np.arctan2(rise_m, flat_m))
+        # what the tilt cannot reach stays off the optical axis (a high shelf close by)
+        off_axis = np.abs(elevation - np.clip(elevation, self.tilt_min_deg, self.tilt_max_deg))
+        fits = off_axis + np.degrees(np.arctan2(picture_height_m / 2, distance)) <= self.vertical_half_fov_deg
+        facing = facing_angle_deg(np.arctan2(to_face[:, 1], to_face[:, 0]), math.atan2(normal[1], normal[0]),
+                                  np.radians(elevation))
+        return np.where(fits, self.table.lookup(distance, off_axis, facing), 0.0)
 
 
 def _cell_centres(room_m: Vec3, res: float) -> tuple[np.ndarray, np.ndarray]:
@@ -89,10 +161,11 @@ def true_floor_map(truth: Truth, criteria: SeeingCriteria = SeeingCriteria()) ->
 
 
 def _segments_hit_box(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Do the 2D segments p0 → p1[i] cross the box [lo, hi]? (slab test, vectorised over p1)"""
+    """Do the segments p0 → p1[i] cross the box [lo, hi]? (slab test in as many dimensions as p0 has,
+    vectorised over p1)"""
     d = p1 - p0
     t0, t1 = np.zeros(len(p1)), np.ones(len(p1))
-    for a in (0, 1):
+    for a in range(len(p0)):
         parallel = np.abs(d[:, a]) < 1e-12
         inside = lo[a] <= p0[a] <= hi[a]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -113,31 +186,33 @@ def seeing_cells(truth: Truth, floor: FloorMap, criteria: SeeingCriteria = Seein
 
 def _seeing_face(truth: Truth, floor: FloorMap, criteria: SeeingCriteria, normal: np.ndarray) -> np.ndarray:
     x, y = _cell_centres(truth.room_m, floor.resolution_m)
-    face = np.array(truth.target_center_m[:2]) + normal * truth.target_depth_m / 2
-    dx, dy = x - face[0], y - face[1]
-    dist = np.hypot(dx, dy)
-    facing = (dx * normal[0] + dy * normal[1]) >= np.cos(np.radians(criteria.max_off_normal_deg)) * dist
-    ok = (dist >= criteria.near_m) & (dist <= criteria.range_m) & facing & ~floor.blocked
-    # an obstacle hides the face if it spans some height between the face and the camera
-    z_lo, z_hi = sorted((truth.target_center_m[2], criteria.camera_height_m))
+    face = truth.face_centre(normal)
+    ok = ~floor.blocked & (np.hypot(x - face[0], y - face[1]) <= criteria.range_m)
     cells = np.stack([x[ok], y[ok]], axis=1)
-    clear = np.ones(len(cells), bool)
-    centre = np.array(truth.target_center_m)
-    for box in truth.obstacles:
-        under = box.max_m[2] <= centre[2] and np.all((centre[:2] >= box.min_m[:2]) & (centre[:2] <= box.max_m[:2]))
-        if box.min_m[2] < z_hi and box.max_m[2] > z_lo and not under:  # what it stands on hides nothing
-            clear &= ~_segments_hit_box(face, cells, np.array(box.min_m[:2]), np.array(box.max_m[:2]))
-    ok[ok] = clear
+    sees = criteria.rate(cells, face, normal, truth.target_height_m) >= criteria.min_rate
+    # lines of sight in 3D from the camera to the picture's centre and corners: all of it in plain view (a
+    # table top below them hides nothing; a shelf's front edge above a camera close below does)
+    cameras = np.column_stack([cells, np.full(len(cells), criteria.camera_height_m)])
+    for point in truth.picture_points(normal):
+        for box in truth.obstacles:
+            sees[sees] &= ~_segments_hit_box(point, cameras[sees], np.array(box.min_m), np.array(box.max_m))
+    ok[ok] = sees
     return ok
 
 
-def viewpoint(truth: Truth, start_xy: tuple[float, float],
-              criteria: SeeingCriteria = SeeingCriteria()) -> tuple[tuple[float, float] | None, float]:
+def viewpoint(truth: Truth, start_xy: tuple[float, float], criteria: SeeingCriteria = SeeingCriteria(),
+              margin_m: float = 0.0) -> tuple[tuple[float, float] | None, float]:
     """The seeing position closest to ``start_xy`` along collision-free paths, and that path's length
-    (``None, inf`` if none is reachable)."""
+    (``None, inf`` if none is reachable). With ``margin_m``, only positions whose every free
+    neighbour within that distance sees the target too: a robot that stops a little off still sees it."""
     floor = true_floor_map(truth, criteria)
+    seen = seeing_cells(truth, floor, criteria)
+    if margin_m > 0:
+        radius = int(math.ceil(margin_m / floor.resolution_m))
+        disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+        seen &= cv2.erode((seen | floor.blocked).astype(np.uint8), disk, borderValue=1).astype(bool)
     field_m = grid_planner.distance_field(floor, start_xy)
-    cost = np.where(seeing_cells(truth, floor, criteria), field_m, np.inf)
+    cost = np.where(seen, field_m, np.inf)
     best = np.unravel_index(int(np.argmin(cost)), cost.shape)
     if not math.isfinite(cost[best]):
         return None, math.inf
@@ -161,11 +236,25 @@ class WorldFacts:
     def tables(self) -> tuple[Box, ...]:
         return tuple(b for b in self.obstacles if b.kind in TABLE_KINDS)
 
+    def support(self, target: Placement) -> Box | None:
+        """The obstacle the target stands on (``None``: the floor)."""
+        x, y, z, _ = target
+        return next((b for b in self.obstacles if abs(b.max_m[2] - z) < 1e-3
+                     and b.min_m[0] <= x <= b.max_m[0] and b.min_m[1] <= y <= b.max_m[1]), None)
+
+    def knowledge_surfaces(self) -> tuple[Box, ...]:
+        """Where the knowledge prior says the target is: on a table, or on a surface of the kind the
+        world's own target stands on (a generated world's shelf or counter)."""
+        own = self.support(self.target)
+        kinds = set(TABLE_KINDS) | ({own.kind} if own else set())
+        return tuple(b for b in self.obstacles if b.kind in kinds)
+
     def truth(self, target: Placement) -> Truth:
         """The real room with the target placed (``target``: its bottom centre and yaw)."""
         x, y, z, yaw = target
         return Truth(self.room_m, tuple(Obstacle(b.min_m, b.max_m) for b in self.obstacles),
-                     (x, y, z + self.target_size_m[2] / 2), yaw, self.target_size_m[0], self.target_sides)
+                     (x, y, z + self.target_size_m[2] / 2), yaw, self.target_size_m[0], self.target_sides,
+                     self.target_size_m[2], self.target_size_m[1])
 
 
 def load_facts(name_or_path: str) -> WorldFacts:
@@ -183,7 +272,7 @@ def load_facts(name_or_path: str) -> WorldFacts:
 def _clearance_m(world: WorldFacts, face: np.ndarray, normal: np.ndarray, support: Box, cap_m: float = 1.5) -> float:
     """Free distance in front of a face along its normal, in a corridor a little wider than the target."""
     side = np.array([-normal[1], normal[0]]) * (world.target_size_m[1] / 2 + 0.05)
-    camera_m = SeeingCriteria().camera_height_m  # what stands between the face and the camera's height
+    camera_m = HeadMount().height_m  # what stands between the face and the camera's height
     blockers = [b for b in world.obstacles
                 if b is not support and b.max_m[2] > support.max_m[2] and b.min_m[2] < camera_m]
     for d in np.arange(0.0, cap_m, 0.05):
@@ -220,10 +309,12 @@ def _table_placements(world: WorldFacts, table: Box, min_clear_m: float = 0.6) -
 def target_placements(world: WorldFacts, count: int = 4,
                       drive_clearance_m: float = DRIVE_CLEARANCE_M) -> list[Placement]:
     """Up to ``count`` placements on the world's tables, taken in turn from each table (report Fig. 5b),
-    then the world's own placement if the tables offer fewer. A table placement counts only if the
-    robot, with its navigation clearance, can drive from the world's start to where it sees it."""
+    then the world's own placement (a generated world's target, on a shelf or a counter) if the tables
+    offer fewer. A table placement counts only if the robot, with its navigation clearance, can drive
+    from the world's start to where it sees the target, with room to stop :data:`ARRIVAL_MARGIN_M` off."""
     drive = SeeingCriteria(robot_radius_m=drive_clearance_m)
-    per_table = [[p for p in _table_placements(world, t) if math.isfinite(viewpoint(world.truth(p), world.start[:2], drive)[1])]
+    per_table = [[p for p in _table_placements(world, t)
+                  if math.isfinite(viewpoint(world.truth(p), world.start[:2], drive, ARRIVAL_MARGIN_M)[1])]
                  for t in world.tables()]
     chosen = [world.target] if suite_of(world.path) else []  # a suite world's own target: checked, and first
     for rank in range(max((len(p) for p in per_table), default=0)):
@@ -261,12 +352,14 @@ def robot_starts(world: WorldFacts, count: int = 5, margin_m: float = 0.45,
 
 
 def tables_hints(world: WorldFacts, layer_m: float = 0.3, mass: float = 0.9) -> str:
-    """The ``tables`` prior as a hints file: the layer just above each table top shares ``mass`` by area."""
-    tables = world.tables()
+    """The ``tables`` (knowledge) prior as a hints file: the layer just above each of the world's
+    :meth:`~WorldFacts.knowledge_surfaces` shares ``mass`` by area."""
+    tables = world.knowledge_surfaces()
     if not tables:
-        raise ValueError(f"{world.name}: no obstacle of kind {' or '.join(TABLE_KINDS)} for the tables prior")
+        raise ValueError(f"{world.name}: no table, desk or surface under its target for the tables prior")
     areas = [(t.max_m[0] - t.min_m[0]) * (t.max_m[1] - t.min_m[1]) for t in tables]
-    lines = [f"# the target is on one of the tables of {world.name}: {mass:g} of the mass just above their tops"]
+    kinds = " or ".join(sorted({t.kind for t in tables}))
+    lines = [f"# the target is on a {kinds} of {world.name}: {mass:g} of the mass just above their tops"]
     for table, area in zip(tables, areas):
         top = min(table.max_m[2] + layer_m, world.room_m[2])
         lines += ["[[hint]]", f'name = "{table.name}"',

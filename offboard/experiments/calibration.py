@@ -1,0 +1,138 @@
+"""The planner's model checked against what happened (issue 12, deliverable 4): per look, the detection
+probability the planner expected against the mass the exact update removed, binned over a sweep.
+
+Each run's folder holds ``looks.jsonl``, written by the search, one JSON object per look::
+
+    {"action": 3, "expected_p": 0.12, "realised_p": 0.10, "detected": false, "processing_s": 1.4, "motion_s": 6.2}
+
+``expected_p``: what the planner predicted for that look; ``realised_p``: the mass the exact update
+removed (or would have found); ``detected``: whether the detector fired. :func:`read_looks` reads
+and validates one file; :func:`calibration` bins looks by expected P; :func:`calibration_md` is the
+report's section.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+from dataclasses import dataclass
+from pathlib import Path
+
+LOOKS_FILE = "looks.jsonl"
+BIN_EDGES = (0.0, 0.05, 0.1, 0.2, 0.4, 1.0)  # the last bin includes 1
+MIN_LOOKS = 20  # a bin with fewer looks is shown but not checked
+TOLERANCE = 0.2  # |mean expected − mean realised| ≤ this × mean expected
+
+
+@dataclass(frozen=True)
+class Look:
+    action: int
+    expected_p: float
+    realised_p: float
+    detected: bool
+    processing_s: float
+    motion_s: float
+
+
+_FIELDS = {"action": int, "expected_p": float, "realised_p": float, "detected": bool, "processing_s": float,
+           "motion_s": float}
+
+
+def _is(value: object, kind: type) -> bool:
+    if kind is bool or isinstance(value, bool):  # a bool is an int in Python: never a number here
+        return kind is bool and isinstance(value, bool)
+    if kind is int:
+        return isinstance(value, int)
+    return isinstance(value, (int, float)) and math.isfinite(value)
+
+
+def parse_look(text: str, where: str = "look") -> Look:
+    """One line of ``looks.jsonl``; a ``ValueError`` naming ``where`` and the field if it is malformed."""
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{where}: not JSON ({exc.msg})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: expected an object, got {type(data).__name__}")
+    values = {}
+    for name, kind in _FIELDS.items():
+        if name not in data:
+            raise ValueError(f"{where}: missing {name!r}")
+        if not _is(data[name], kind):
+            raise ValueError(f"{where}: {name} = {data[name]!r} is not a finite {kind.__name__}")
+        values[name] = kind(data[name])
+    for name in ("expected_p", "realised_p"):
+        if not 0.0 <= values[name] <= 1.0 + 1e-9:
+            raise ValueError(f"{where}: {name} = {values[name]!r} is not a probability")
+    return Look(**values)
+
+
+def read_looks(path: Path) -> list[Look]:
+    """Every look of one run (``[]`` if the run wrote no log)."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    lines = path.read_text().splitlines()
+    return [parse_look(line, f"{path}:{n}") for n, line in enumerate(lines, 1) if line.strip()]
+
+
+@dataclass(frozen=True)
+class CalibrationBin:
+    low: float
+    high: float
+    looks: int
+    expected: float | None  # mean expected P
+    realised: float | None  # mean realised P
+    hit_rate: float | None  # share of looks whose detector fired
+
+    @property
+    def checked(self) -> bool:
+        return self.looks >= MIN_LOOKS
+
+    @property
+    def passes(self) -> bool | None:
+        """|mean expected − mean realised| ≤ :data:`TOLERANCE` × mean expected; None if too few looks."""
+        if not self.checked:
+            return None
+        return abs(self.expected - self.realised) <= TOLERANCE * self.expected
+
+
+def _mean(values: list[float]) -> float | None:
+    return statistics.fmean(values) if values else None
+
+
+def calibration(looks: list[Look]) -> list[CalibrationBin]:
+    """Looks binned by expected P (:data:`BIN_EDGES`), each bin's means and hit rate."""
+    bins = []
+    for k, (low, high) in enumerate(zip(BIN_EDGES, BIN_EDGES[1:])):
+        last = k == len(BIN_EDGES) - 2
+        inside = [x for x in looks if low <= x.expected_p < high or (last and x.expected_p >= high)]
+        bins.append(CalibrationBin(low, high, len(inside), _mean([x.expected_p for x in inside]),
+                                   _mean([x.realised_p for x in inside]), _mean([float(x.detected) for x in inside])))
+    return bins
+
+
+def _cell(v: float | None) -> str:
+    return "—" if v is None else f"{v:.3f}"
+
+
+def calibration_md(bins: list[CalibrationBin], source: str) -> list[str]:
+    """The report's section; ``source`` says which runs (worlds, seeds) the looks came from."""
+    total = sum(b.looks for b in bins)
+    lines = ["## Calibration: expected against realised P", ""]
+    if total == 0:
+        return lines + [f"No run logged its looks ({LOOKS_FILE}): nothing to check.", ""]
+    lines += [f"{total} looks of {source}, binned by the detection probability the planner expected. Realised P: "
+              f"the mass the exact update removed. Check: |mean expected − mean realised| ≤ {TOLERANCE:.0%} of the "
+              f"mean expected, in every bin with ≥ {MIN_LOOKS} looks.", "",
+              "| Expected P | Looks | Mean expected P | Mean realised P | Hit rate | Check |", "|---" * 6 + "|"]
+    for b in bins:
+        bracket = "]" if b.high == BIN_EDGES[-1] else ")"
+        verdict = {None: f"— (< {MIN_LOOKS} looks)", True: "PASS", False: "FAIL"}[b.passes]
+        lines.append(f"| [{b.low:g}, {b.high:g}{bracket} | {b.looks} | {_cell(b.expected)} | {_cell(b.realised)} | "
+                     f"{_cell(b.hit_rate)} | {verdict} |")
+    checked = [b for b in bins if b.checked]
+    overall = "PASS" if checked and all(b.passes for b in checked) else ("FAIL" if checked else "not checked")
+    return lines + ["", f"Calibration overall: **{overall}** ({sum(bool(b.passes) for b in checked)}/{len(checked)} "
+                        "checked bins pass).", ""]

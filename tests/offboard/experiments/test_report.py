@@ -1,0 +1,137 @@
+"""The report: per-world tables, motion and processing apart, priors side by side, and the calibration of
+expected against realised P from each run's looks.jsonl."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from offboard.experiments.calibration import LOOKS_FILE, Look, calibration, parse_look, read_looks
+from offboard.experiments.harness import Run, make_row
+from offboard.experiments.report import COLUMNS, append_row, load_results, write_report
+from offboard.experiments.world_facts import load_facts
+
+SUMMARY = {"found": True, "status": "found", "actions": 6, "positions_visited": 2, "distance_m": 3.0,
+           "robot_time_s": 240.0, "wall_time_s": 30.0, "planning_ms_p50": 40.0, "planning_ms_p95": 80.0,
+           "prob_outside": 0.0, "prob_inside": 1.0, "success_prob": 0.9, "cost_function": 3, "detector": "sift",
+           "decisions": 6, "prior": "uniform"}
+TARGETS = {"paper-lab": (1.7, 4.65, 0.75, -90.0), "office": (4.3, 2.6, 0.74, -90.0)}
+STARTS = {"paper-lab": (4.5, 0.6, 90.0), "office": (5.5, 1.0, 135.0)}
+
+
+def _look(expected: float, realised: float, detected: bool = False) -> dict:
+    return {"action": 1, "expected_p": expected, "realised_p": realised, "detected": detected,
+            "processing_s": 2.0, "motion_s": 5.0}
+
+
+def _row(results: Path, method: str, world: str, prior: str, seed: int, motion_s: float | None,
+         processing_s: float | None, looks: list[dict] = ()) -> dict:
+    x, y, z, yaw = TARGETS[world]
+    summary = {**SUMMARY, "target_estimate_m": [x, y - 0.05, z + 0.1]}
+    if motion_s is not None:
+        summary.update(motion_time_s=motion_s, processing_time_s=processing_s)
+    run = Run(method, world, STARTS[world], TARGETS[world], 3 if method == "syt" else None, prior, seed)
+    row = make_row(run, load_facts(world), summary, 10.0)
+    append_row(results, row)
+    run_dir = results.parent / row["run_dir"]
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / LOOKS_FILE).write_text("".join(json.dumps(look) + "\n" for look in looks))
+    return row
+
+
+def test_rows_carry_motion_and_processing_time_and_keep_the_old_columns_first(tmp_path):
+    results = tmp_path / "results.csv"
+    row = _row(results, "syt", "office", "uniform", 0, 120.0, 60.0)
+    assert row["motion_time_s"] == 120.0 and row["processing_time_s"] == 60.0 and row["run_dir"].startswith("runs/")
+    assert COLUMNS[:7] == ("method", "world", "start", "target", "cost", "prior", "seed")
+    assert COLUMNS[-3:] == ("motion_time_s", "processing_time_s", "run_dir") and COLUMNS[-4] == "key"
+    _row(results, "syt", "office", "uniform", 1, None, None)  # a search that did not measure them
+    loaded = {r["seed"]: r for r in load_results(results)}
+    assert loaded[0]["time_min"] == pytest.approx(3.0) and loaded[0]["processing_min"] == pytest.approx(1.0)
+    assert loaded[1]["processing_min"] is None and loaded[1]["time_min"] == pytest.approx(4.0)  # robot clock only
+
+
+def test_the_report_has_a_table_per_world_times_apart_and_names_worlds_and_seeds(tmp_path):
+    results = tmp_path / "results.csv"
+    for world in ("paper-lab", "office"):
+        for method in ("syt", "frontier", "oracle"):
+            for seed in (0, 1):
+                _row(results, method, world, "uniform", seed, 100.0 + 50 * (method == "syt"), 30.0)
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    for section in ("## Per world", "### paper-lab", "### office", "## Time: motion and processing",
+                    "## Calibration: expected against realised P", "## Priors side by side (SYT)"):
+        assert section in text, section
+    office = text.split("### office")[1].split("##")[0]
+    assert "From office; seeds 0,1; 1 start × target scenarios." in office
+    assert "| SYT cost 3, uniform | 2 | 100.0% |" in office and "| frontier, uniform | 2 | 100.0% |" in office
+    # motion 2.50 min, processing 0.50, their sum 3.00: shown apart and summed
+    assert "| 2.50 | 0.50 | 3.00 |" in office
+    assert "about 15 s of processing per action" in text and "5.0 s of processing per action" in text
+    assert "paper-lab, office; seeds 0,1" in text
+
+
+def test_processing_not_measured_is_said_and_not_summed(tmp_path):
+    results = tmp_path / "results.csv"
+    _row(results, "syt", "office", "uniform", 0, 100.0, 30.0)
+    _row(results, "syt", "office", "uniform", 1, None, None)
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert "**1 of 2 successful runs did not measure processing**" in text
+    assert "| SYT cost 3, uniform | 2 | 100.0% | " in text and "| — | — |" in text  # no partial means
+
+
+def test_priors_are_shown_side_by_side(tmp_path):
+    results = tmp_path / "results.csv"
+    for prior in ("uniform", "tables", "surfaces", "saliency"):
+        _row(results, "syt", "office", prior, 0, 100.0, 30.0)
+    write_report(results, tmp_path)
+    section = (tmp_path / "report.md").read_text().split("## Priors side by side (SYT)")[1].split("\n## ")[0]
+    rows = [line for line in section.splitlines() if line.startswith("| 3 |")]
+    assert [line.split(" | ")[1] for line in rows] == ["uniform", "tables", "surfaces", "saliency"]
+
+
+def test_the_calibration_bins_looks_and_checks_each_bin_with_enough_looks(tmp_path):
+    results = tmp_path / "results.csv"
+    good = [_look(0.3, 0.28, k % 4 == 0) for k in range(20)]  # within 20 %
+    bad = [_look(0.02, 0.001) for _ in range(25)]  # the model promises 20 times what happens
+    few = [_look(0.5, 0.1, True) for _ in range(3)]  # far off, but too few looks to judge
+    _row(results, "syt", "office", "uniform", 0, 100.0, 30.0, good[:10] + bad)
+    _row(results, "syt", "office", "uniform", 1, 100.0, 30.0, good[10:] + few)
+    _row(results, "frontier", "office", "uniform", 0, 100.0, 30.0, bad)  # baselines are not the model
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert "48 looks of the SYT runs (office; seeds 0,1" in text
+    assert "| [0, 0.05) | 25 | 0.020 | 0.001 | 0.000 | FAIL |" in text
+    assert "| [0.2, 0.4) | 20 | 0.300 | 0.280 | 0.250 | PASS |" in text
+    assert "| [0.4, 1] | 3 | 0.500 | 0.100 | 1.000 | — (< 20 looks) |" in text
+    assert "Calibration overall: **FAIL** (1/2 checked bins pass)." in text
+
+
+def test_bin_edges_belong_to_the_upper_bin_and_one_to_the_last():
+    bins = calibration([Look(1, p, p, False, 0.0, 0.0) for p in (0.0, 0.05, 0.1, 0.2, 0.4, 1.0)])
+    assert [b.looks for b in bins] == [1, 1, 1, 1, 2]
+
+
+@pytest.mark.parametrize("text, named", [
+    ('{"action": 1, "expected_p": 0.1, "realised_p": 0.1, "detected": false, "processing_s": 1.0}', "motion_s"),
+    ('{"action": 1, "expected_p": 1.5, "realised_p": 0.1, "detected": false, "processing_s": 1, "motion_s": 2}',
+     "expected_p"),
+    ('{"action": true, "expected_p": 0.1, "realised_p": 0.1, "detected": false, "processing_s": 1, "motion_s": 2}',
+     "action"),
+    ('{"action": 1, "expected_p": 0.1, "realised_p": 0.1, "detected": 0, "processing_s": 1, "motion_s": 2}',
+     "detected"),
+    ('{"action": 1, "expected_p": 0.1, "realised_p": NaN, "detected": false, "processing_s": 1, "motion_s": 2}',
+     "realised_p"),
+    ("[1, 2]", "expected an object"),
+    ("{not json", "not JSON"),
+])
+def test_a_malformed_look_is_refused_naming_the_line_and_field(tmp_path, text, named):
+    path = tmp_path / LOOKS_FILE
+    path.write_text(json.dumps(_look(0.1, 0.1)) + "\n" + text + "\n")
+    with pytest.raises(ValueError, match=f"{LOOKS_FILE}:2: .*{named}"):
+        read_looks(path)
+    assert parse_look(json.dumps(_look(0.1, 0.05, True))).detected is True
+    assert read_looks(tmp_path / "absent.jsonl") == []

@@ -1,0 +1,131 @@
+"""The experimenter's truth: "sees the target" is what the detector's table, the tilt limits and occlusion allow,
+and a generated world (its target on a shelf, no table) still gives scenarios."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+import pytest
+
+from offboard.experiments import harness as experiment
+from offboard.experiments.baselines import BaselineContext
+from offboard.experiments.world_facts import (ARRIVAL_MARGIN_M, Obstacle, SeeingCriteria, Truth, detector_table,
+                                              load_facts, seeing_cells, tables_hints, target_placements,
+                                              true_floor_map, viewpoint)
+from offboard.perception.detectability import DetectabilityTable
+
+# a 6 × 5 m room; a 2.1 m shelf against the north wall with the target on top, its picture facing the room
+SHELF = Obstacle((2.5, 4.69, 0.0), (3.5, 5.0, 1.9))  # the picture 5 mm in front of its edge
+HIGH = Truth((6.0, 5.0, 2.5), (SHELF,), (3.0, 4.8, 1.9 + 0.115), -90.0)
+
+
+def _sees(truth: Truth, xy: tuple[float, float], criteria: SeeingCriteria = SeeingCriteria()) -> bool:
+    floor = true_floor_map(truth, criteria)
+    return bool(seeing_cells(truth, floor, criteria)[int(xy[0] / 0.05), int(xy[1] / 0.05)])
+
+
+def test_the_criteria_are_read_from_the_detectors_table():
+    table = DetectabilityTable.nominal(near_m=0.5, far_m=3.0, peak=0.95, max_facing_deg=60.0)
+    criteria = SeeingCriteria(table=table, min_rate=0.8)
+    # 0.95 × (1 − 0.3 ((d − 0.5) / 2.5)²) × √cos(facing) ≥ 0.8: bins up to 2.25 m and 40° off the normal
+    assert (criteria.near_m, criteria.range_m, criteria.max_off_normal_deg) == (0.5, 2.25, 40.0)
+    assert SeeingCriteria(table=table, min_rate=0.9).range_m < criteria.range_m  # stricter: nearer
+    shipped = SeeingCriteria()  # the SIFT table the searches load, not hard-coded numbers
+    assert shipped.table.detector == "sift" and np.array_equal(shipped.table.rate, detector_table("sift").rate)
+    assert shipped.range_m > 3.0 and 0 < shipped.max_off_normal_deg <= 60.0
+
+
+def test_a_position_sees_where_the_measured_rate_is_high_enough():
+    low = Truth((6.0, 5.0, 2.5), (), (3.0, 4.0, 1.2), -90.0)  # at camera height, facing -y
+    criteria = SeeingCriteria()
+    for d in (1.0, 2.0, 3.0):
+        head_on = criteria.rate(np.array([[3.0, 3.885 - d]]), low.face_centre(np.array([0.0, -1.0])),
+                                np.array([0.0, -1.0]), 0.23)[0]
+        assert head_on >= 0.9 and _sees(low, (3.0, 3.885 - d))
+    assert not _sees(low, (3.0 + 2.4, 3.885 - 0.6))  # 76° off the picture's normal: the table's rate is low
+    assert not _sees(low, (3.0, 4.5))  # behind the picture
+
+
+def test_a_high_shelf_target_close_by_is_out_of_the_tilt_range():
+    criteria = SeeingCriteria()
+    face = HIGH.face_centre(np.array([0.0, -1.0]))
+    for d in (0.4, 0.6):  # the tilt limit leaves it above the picture's top edge (26° above the axis)
+        elevation = math.degrees(math.atan2(face[2] - criteria.camera_height_m, d))
+        assert elevation - criteria.tilt_max_deg > criteria.vertical_half_fov_deg - 7  # less half the picture
+        assert not _sees(HIGH, (3.0, face[1] - d))
+    assert _sees(HIGH, (3.0, face[1] - 0.8)) and _sees(HIGH, (3.0, face[1] - 1.8))  # in the image, if off-axis
+
+
+def test_the_oracles_viewpoint_for_a_high_shelf_target_is_far_enough_back_and_sees_it_around():
+    config = BaselineContext().config
+    goal, _ = viewpoint(HIGH, (3.0, 0.5), config.oracle_view, config.arrived_m)
+    face = HIGH.face_centre(np.array([0.0, -1.0]))
+    assert face[1] - goal[1] > 0.6  # not under the shelf, where the tilt cannot reach
+    for angle in np.linspace(0, 2 * math.pi, 8, endpoint=False):  # stopping a little off still sees it
+        off = (goal[0] + 0.8 * ARRIVAL_MARGIN_M * math.cos(angle), goal[1] + 0.8 * ARRIVAL_MARGIN_M * math.sin(angle))
+        assert _sees(HIGH, off, config.oracle_view), off
+
+
+def test_a_picture_half_hidden_is_not_seen():
+    # a cabinet as tall as the target hides the left half of its picture from straight ahead
+    truth = Truth((6.0, 5.0, 2.5), (Obstacle((2.0, 3.0, 0.0), (3.0, 3.2, 1.5)),), (3.0, 4.0, 1.2), -90.0)
+    assert not _sees(truth, (2.95, 1.5))
+    assert _sees(truth, (3.6, 1.5))  # from the right of it, in plain view
+
+
+def test_a_shelf_edge_hides_a_target_set_back_from_a_camera_below_it():
+    deep = Truth((6.0, 5.0, 2.5), (SHELF,), (3.0, 4.95, 1.9 + 0.115), -90.0)  # its face 0.23 m behind the edge
+    for y in np.arange(1.0, 4.0, 0.25):
+        assert not _sees(deep, (3.0, y)), y
+    assert _sees(HIGH, (3.0, 2.8))
+
+
+GENERATED = """
+name = "storeroom"
+[room]
+size = [7.0, 6.0, 2.6]
+[[obstacle]]
+name = "shelf"
+kind = "shelf"
+min = [2.0, 5.4, 0.0]
+max = [4.0, 6.0, 1.1]
+[[obstacle]]
+name = "counter"
+kind = "counter"
+min = [0.0, 0.0, 0.0]
+max = [1.2, 2.0, 0.9]
+[target]
+size = [0.23, 0.23, 0.23]
+position = [3.0, 5.6, 1.1]
+yaw_deg = -90
+[robot]
+start = [5.0, 2.0]
+heading_deg = 90
+"""
+
+
+def test_a_generated_world_without_tables_runs_on_its_own_target(tmp_path):
+    path = tmp_path / "storeroom.toml"
+    path.write_text(GENERATED)
+    world = load_facts(str(path))
+    assert target_placements(world, 4) == [world.target]
+    assert math.isfinite(viewpoint(world.truth(world.target), world.start[:2])[1])
+    # more targets and starts asked for than the world offers: no crash, what it has
+    spec = experiment.GridSpec(worlds=(str(path),), starts=3, targets=6, costs=(3,), priors=("uniform", "tables"),
+                               methods=("syt", "oracle"))
+    runs = experiment.build_runs(spec)
+    assert {r.target for r in runs} == {world.target} and len(runs) == 3 * 2 * 2
+    # the knowledge prior: the kind of surface its target stands on (a shelf), not tables it does not have
+    assert [b.name for b in world.knowledge_surfaces()] == ["shelf"]
+    assert 'name = "shelf"' in tables_hints(world)
+
+
+def test_the_harness_accepts_the_priors_that_need_no_knowledge():
+    parser = argparse.ArgumentParser()
+    experiment.add_arguments(parser)
+    parsed = parser.parse_args(["--priors", "uniform,tables,surfaces,saliency"])
+    assert parsed.priors == ("uniform", "tables", "surfaces", "saliency")
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--priors", "psychic"])
