@@ -308,10 +308,11 @@ def _table_placements(world: WorldFacts, table: Box, min_clear_m: float = 0.6) -
 
 def target_placements(world: WorldFacts, count: int = 4,
                       drive_clearance_m: float = DRIVE_CLEARANCE_M) -> list[Placement]:
-    """Up to ``count`` placements on the world's tables, taken in turn from each table (report Fig. 5b),
-    then the world's own placement (a generated world's target, on a shelf or a counter) if the tables
-    offer fewer. A table placement counts only if the robot, with its navigation clearance, can drive
-    from the world's start to where it sees the target, with room to stop :data:`ARRIVAL_MARGIN_M` off."""
+    """Up to ``count`` placements: a suite world's own target first (checked when it was generated), then
+    the world's tables', taken in turn from each table (report Fig. 5b), then any other world's own
+    placement if the tables offer fewer; fewer than ``count`` if that is all there is. A table placement
+    counts only if the robot, with its navigation clearance, can drive from the world's start to where
+    it sees the target, with room to stop :data:`ARRIVAL_MARGIN_M` off."""
     drive = SeeingCriteria(robot_radius_m=drive_clearance_m)
     per_table = [[p for p in _table_placements(world, t)
                   if math.isfinite(viewpoint(world.truth(p), world.start[:2], drive, ARRIVAL_MARGIN_M)[1])]
