@@ -16,15 +16,15 @@ A world that fails raises ``WorldRejected`` with the reason.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 import cv2
 import numpy as np
 
 from onboard.config import CameraConfig
 from onboard.sim.render import StereoRenderer
-from shared.geometry import Pose2D
+from shared.geometry import Pose2D, RigidTransform
 from shared.limits import PanTiltLimits
 from shared.world import FLOOR_OBSTACLE_MAX_Z_M, World
 
@@ -175,13 +175,13 @@ def _candidate_poses(world: World, floor: FloorGrid, camera: CameraConfig, panti
                                           rule.image_margin_px)]
 
 
-def _in_image(camera: CameraConfig, camera_in_world, point: np.ndarray, margin_px: float) -> bool:
+def _in_image(camera: CameraConfig, camera_in_world: RigidTransform, point: np.ndarray, margin_px: float) -> bool:
     intr = camera.intrinsics()
     u, v = intr.project(camera_in_world.inverse().apply(point[None, :]))[0]
     return bool(margin_px <= u <= intr.width_px - 1 - margin_px and margin_px <= v <= intr.height_px - 1 - margin_px)
 
 
-def _unoccluded(renderer: StereoRenderer, world: World, pose: tuple, camera: CameraConfig,
+def _unoccluded(renderer: StereoRenderer, world: World, pose: tuple[float, ...], camera: CameraConfig,
                 rule: SeeingRule) -> bool:
     """Does the rendered depth at every probe of the picture match the probe's own depth?"""
     camera_in_world = camera.mount().camera_in_world(Pose2D(*pose[:3]), 0.0, pose[3])

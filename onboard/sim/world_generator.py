@@ -122,7 +122,8 @@ def generate_world(rng: np.random.Generator, name: str) -> dict[str, Any]:
     data = {
         "name": name,
         "room": {"size": list(room), "texture": str(rng.choice(WALL_TEXTURES)),
-                 "floor_texture": str(rng.choice(FLOOR_TEXTURES)), "ceiling_texture": str(rng.choice(CEILING_TEXTURES))},
+                 "floor_texture": str(rng.choice(FLOOR_TEXTURES)),
+                 "ceiling_texture": str(rng.choice(CEILING_TEXTURES))},
         "obstacle": [{"name": p.name, "kind": CATALOGUE[p.label].kind, "min": list(p.lo), "max": list(p.hi),
                       "texture": p.texture} for p in pieces],
         "target": target,
