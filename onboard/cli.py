@@ -5,11 +5,13 @@
     syt-onboard bench --json
     syt-onboard picture NAME --out FILE.png          a built-in picture (the target's) for the planner
     syt-onboard worlds generate --count N --seed S --out DIR     checked rooms room-S-K.toml
+    syt-onboard emulate --world NAME_OR_FILE         a Pioneer and a PTU-D46 on pseudo-terminals (JSON line)
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import math
 import signal
@@ -48,7 +50,8 @@ def _load_world(args: argparse.Namespace, config: OnboardConfig):
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="syt-onboard", description="The onboard agent of a syt robot.")
     parser.add_argument("--config", type=Path, metavar="FILE.toml", help="onboard configuration")
-    parser.add_argument("--backend", choices=("sim",), help="device backend (default: the config's, sim)")
+    parser.add_argument("--backend", choices=("sim", "hardware"),
+                        help="device backend (default: the config's, sim); hardware reads [hardware.*]")
     parser.add_argument("--realtime", action="store_true", help="simulator: pace the clock like the real robot")
     parser.add_argument("--seed", type=int, help="simulator: odometry-noise seed")
     parser.add_argument("-v", "--verbose", action="store_true")
@@ -76,15 +79,21 @@ def run_agent(argv: list[str]) -> int:
         log.error("%s", exc)
         return 2
     from onboard.agent import Agent
-    from onboard.sim.robot import build_sim_robot
+    from onboard.backends import build_robot
+    from onboard.hardware.fault import DeviceFault
+    from onboard.hardware.stereo_rig import CalibrationFileError
 
-    robot = build_sim_robot(config, world)
+    try:
+        robot = build_robot(config, world)
+    except (DeviceFault, CalibrationFileError, WorldError) as exc:
+        log.error("cannot start the %s backend: %s", config.backend, exc)
+        return 1
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     session = transport.open()
     try:
-        agent = Agent(config, robot.devices, session, transport.robot_id, sim=robot)
+        agent = Agent(config, robot.devices, session, transport.robot_id, sim=robot.sim)
         agent.run(stop)
     finally:
         session.close()
@@ -177,7 +186,37 @@ def run_worlds(argv: list[str]) -> int:
     return 0
 
 
-_COMMANDS = {"render": run_render, "bench": run_bench, "picture": run_picture, "worlds": run_worlds}
+def run_emulate(argv: list[str]) -> int:
+    """Both emulators on pseudo-terminals over one simulated world, until SIGINT or SIGTERM."""
+    parser = argparse.ArgumentParser(
+        prog="syt-onboard emulate", description="Emulate a Pioneer and a PTU-D46 on pseudo-terminals; print "
+        'their paths and the truth link as one JSON line {"base", "pantilt", "truth"}.')
+    _add_world_args(parser)
+    parser.add_argument("--config", type=Path, metavar="FILE.toml", help="limits, odometry noise and seed")
+    parser.add_argument("--seed", type=int, help="odometry-noise seed")
+    args = parser.parse_args(argv)
+    _setup_logging(False)
+    from onboard.emulators.robot import EmulatedRobot
+    from shared.world import WorldError
+
+    try:
+        config = load_config(OnboardConfig, args.config, {"sim.seed": args.seed} if args.seed is not None else {})
+        world = _load_world(args, config)
+    except (ConfigError, WorldError) as exc:
+        log.error("%s", exc)
+        return 2
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    with EmulatedRobot(config, world, args.world or config.sim.world) as robot:
+        sys.stdout.write(json.dumps(robot.ports()) + "\n")
+        sys.stdout.flush()
+        stop.wait()
+    return 0
+
+
+_COMMANDS = {"render": run_render, "bench": run_bench, "picture": run_picture, "worlds": run_worlds,
+             "emulate": run_emulate}
 
 
 def main(argv: list[str] | None = None) -> int:

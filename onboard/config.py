@@ -13,6 +13,13 @@ world = "paper-lab"
 realtime = false
 [sim.odometry_noise]
 distance_frac = 0.02
+[hardware.base]   # onboard.hardware.pioneer.PioneerConfig; used when backend = "hardware"
+port = "/dev/pioneer"   # a device path, a pyserial URL ("socket://127.0.0.1:8101") or "sim"
+[hardware.pantilt] # onboard.hardware.ptu.PtuConfig
+port = "/dev/ptu"       # or "sim"
+[hardware.camera]  # onboard.hardware.uvc_camera.UvcStereoConfig
+device = "/dev/video0"  # or "sim"
+calibration = "stereo.yaml"
 ```
 """
 
@@ -21,6 +28,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from onboard.hardware.pioneer import PioneerConfig
+from onboard.hardware.ptu import PtuConfig
+from onboard.hardware.uvc_camera import UvcStereoConfig
 from shared.geometry import HeadMount, Intrinsics
 from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
 from shared.strict import bounds
@@ -64,12 +74,33 @@ class SimConfig:
 
 
 @dataclass(frozen=True)
+class HardwareConfig:
+    """``[hardware]``: the serial and camera devices of ``backend = "hardware"``. A device whose port
+    (or camera device) is ``"sim"`` is simulated in ``[sim]``'s world, so a robot with only a real
+    base can run; the defaults simulate all three."""
+
+    base: PioneerConfig = PioneerConfig()
+    pantilt: PtuConfig = PtuConfig()
+    camera: UvcStereoConfig = UvcStereoConfig()
+    # The Unix socket ``syt-onboard emulate`` announces as "truth": simulated devices then render the
+    # emulated robot's world from its true pose and head angles instead of the agent's own readings.
+    truth: str = ""
+
+    def __post_init__(self) -> None:
+        for key, value in (("base.port", self.base.port), ("pantilt.port", self.pantilt.port),
+                           ("camera.device", self.camera.device)):
+            if not value.strip():
+                raise ValueError(f"hardware.{key} is empty: give a device path, a URL or \"sim\"")
+
+
+@dataclass(frozen=True)
 class OnboardConfig:
-    backend: Literal["sim"] = "sim"  # the serial-hardware backend is the next issue
+    backend: Literal["sim", "hardware"] = "sim"  # hardware: [hardware] below
     watchdog_ms: int = field(default=1000, metadata=bounds(50, 60_000))  # stop if the planner is silent
     publish_hz: float = field(default=10.0, metadata=bounds(0.1, 200.0))  # odometry and pan/tilt
     base: BaseLimits = BaseLimits()
     pantilt: PanTiltLimits = PanTiltLimits()
     camera: CameraConfig = CameraConfig()
     timing: CameraTiming = CameraTiming()
-    sim: SimConfig = SimConfig()
+    sim: SimConfig = SimConfig()  # the world of the simulator, and of hardware devices set to "sim"
+    hardware: HardwareConfig = HardwareConfig()

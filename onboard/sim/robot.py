@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import logging
 import time
+from typing import Protocol
 
 from onboard.config import OnboardConfig
-from onboard.devices import Devices, StereoImages
+from onboard.devices import Devices, PanTiltReading, StereoImages
 from onboard.sim.base import SimBase
 from onboard.sim.clock import SimClock
 from onboard.sim.faults import FaultInjector
@@ -21,10 +22,21 @@ from shared.limits import CameraTiming
 log = logging.getLogger(__name__)
 
 
+class TruePose(Protocol):
+    """Where a simulated camera stands: a simulated base, or what stands in for one."""
+
+    @property
+    def true_pose(self) -> Pose2D: ...
+
+
+class HeadAngles(Protocol):
+    def reading(self) -> PanTiltReading: ...
+
+
 class SimStereoCamera:
     """Renders the pair from the *true* pose; the agent stamps it with the odometry pose."""
 
-    def __init__(self, renderer: StereoRenderer, base: SimBase, pantilt: SimPanTilt,
+    def __init__(self, renderer: StereoRenderer, base: TruePose, pantilt: HeadAngles,
                  clock: SimClock, timing: CameraTiming):
         self.intrinsics = renderer.intrinsics
         self.mount = renderer.mount

@@ -24,7 +24,10 @@ def test_file_and_overrides(tmp_path):
     ("watchdog_ms = 10\n", "watchdog_ms"),  # below the 50 ms floor
     ("[base]\nmax_sped_m_s = 1.0\n", "base.max_sped_m_s"),  # a typo is not silently ignored
     ("[base]\ndefault_speed_m_s = 2.0\nmax_speed_m_s = 1.0\n", "base"),
-    ("backend = 'hardware'\n", "backend"),
+    ("backend = 'serial'\n", "backend"),
+    ("[hardware.base]\nport = ''\n", "hardware.base.port"),
+    ("[hardware.base]\nbaud = 12\n", "hardware.base.baud"),
+    ("[hardware.camera]\ndevise = '/dev/video0'\n", "hardware.camera.devise"),
     ("[sim.odometry_noise]\ndistance_frac = nan\n", "sim.odometry_noise.distance_frac"),
     ("[pantilt\n", ""),  # TOML syntax
 ])
@@ -34,6 +37,18 @@ def test_mistakes_name_the_file_and_key(tmp_path, text, key):
     with pytest.raises(ConfigError) as err:
         load_config(OnboardConfig, path)
     assert str(path) in str(err.value) and key in str(err.value)
+
+
+def test_the_hardware_contract_keys(tmp_path):
+    path = tmp_path / "robot.toml"
+    path.write_text('backend = "hardware"\n[hardware.base]\nport = "socket://127.0.0.1:8101"\n'
+                    '[hardware.pantilt]\nport = "/dev/ptu"\n[hardware.camera]\ndevice = "sim"\n'
+                    'calibration = "stereo.yaml"\n')
+    config = load_config(OnboardConfig, path)
+    hw = config.hardware
+    assert (config.backend, hw.base.port, hw.pantilt.port, hw.camera.device, hw.camera.calibration) == (
+        "hardware", "socket://127.0.0.1:8101", "/dev/ptu", "sim", "stereo.yaml")
+    assert load_config(OnboardConfig).hardware.base.port == "sim"  # the defaults run without hardware
 
 
 def test_missing_file_is_a_config_error(tmp_path):
