@@ -341,7 +341,7 @@ def draw_checked_world(seed: int, index: int, out_dir: Path) -> tuple[str, int]:
         started = time.perf_counter()
         try:
             data = generate_world(rng, name)
-            world = parse_world(data, out_dir)
+            world = parse_world(tomllib.loads(world_toml(data)), out_dir)  # what the file will hold
             check_renderable(world)
             seen = check_world(world)
         except (WorldRejected, WorldError) as exc:  # WorldError: a draw the format refuses (overlaps)
@@ -352,8 +352,6 @@ def draw_checked_world(seed: int, index: int, out_dir: Path) -> tuple[str, int]:
                    f"camera sees the target's picture\nfrom {seen.distance_m:.2f} m, {seen.off_normal_deg:.0f}° "
                    f"off its normal, at tilt {math.degrees(seen.tilt_rad):.0f}° (confirmed by rendering).")
         text = world_toml(data, comment)
-        if tomllib.loads(text) != data:
-            raise RuntimeError(f"{name}: the world file does not read back as written")  # a writer bug
         log.info("%s: %.1f x %.1f x %.2f m, %d pieces, target %.2f m high, seen from %.2f m after %d render(s), "
                  "%.2f s", name, *data["room"]["size"], len(data["obstacle"]), data["target"]["position"][2],
                  seen.distance_m, seen.renders, time.perf_counter() - started)
