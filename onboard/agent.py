@@ -44,6 +44,7 @@ _SIM_ONLY = ("sim_truth", "sim_teleport", "sim_reset", "sim_fault")
 # Only a planner's commands count as word from it: anyone may poll state or info (an observer, a
 # dashboard, a crowd of them), and that must not keep alive a motion whose planner froze.
 _PLANNER_COMMANDS = ("move", "stop", "look", "capture")
+_WATCHDOG_POLL_S = 0.02  # how often the watchdog looks at a moving base
 
 
 class CommandRefused(Exception):
@@ -112,6 +113,7 @@ class Agent:
         self._cancel = {"base": threading.Event(), "pantilt": threading.Event()}
         self._watch = _PlannerWatch(last_contact_s=time.monotonic())
         self._shutdown = threading.Event()
+        self._wake_watchdog = threading.Event()  # a lost planner is acted on at once, not at the next poll
         self._declared: list = []
         self._threads: list[threading.Thread] = []
 
@@ -150,6 +152,7 @@ class Agent:
 
     def _close(self) -> None:
         self._shutdown.set()
+        self._wake_watchdog.set()
         for cancel in self._cancel.values():
             cancel.set()
         try:
@@ -184,6 +187,7 @@ class Agent:
         if sample.kind == zenoh.SampleKind.DELETE:
             log.warning("planner gone: %s", sample.key_expr)
             self._watch.token_lost = True
+            self._wake_watchdog.set()
         else:
             log.info("planner connected: %s", sample.key_expr)
             self._watch.token_lost = False
@@ -351,14 +355,20 @@ class Agent:
 
     def _watchdog_loop(self) -> None:
         timeout_s = self.config.watchdog_ms / 1000.0
-        while not self._shutdown.wait(0.02):
+        wait_s = _WATCHDOG_POLL_S
+        while not self._shutdown.is_set():
+            self._wake_watchdog.wait(wait_s)
+            self._wake_watchdog.clear()
+            wait_s = _WATCHDOG_POLL_S
             if not self.devices.base.reading().moving:
                 continue
             silent_s = time.monotonic() - self._watch.last_contact_s
             if self._watch.token_lost:
                 self._stop_all("planner lost (liveliness token gone)")
-            elif silent_s > timeout_s:
+            elif silent_s >= timeout_s:
                 self._stop_all(f"watchdog: no word from the planner for {silent_s * 1000:.0f} ms")
+            else:
+                wait_s = min(wait_s, timeout_s - silent_s)  # wake on the deadline itself
 
     def _stop_all(self, why: str) -> None:
         log.warning("stopping the base: %s", why)
