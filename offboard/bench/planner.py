@@ -49,7 +49,9 @@ def _scenario(resolution_m: float) -> tuple[SearchPlanner, OccupancyGrid]:
 
 
 def _decide(planner: SearchPlanner, occupancy: OccupancyGrid, pose: Pose2D):
+    """One decision as the search makes it: candidates planned, paths to them, the choice."""
     floor = occupancy.floor_map(0.26, 1.35)
+    planner.plan_positions(pose, floor, 0.31)
     field = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
     paths = grid_planner.distances_at(floor, field, planner.positions)
     return planner.decide(pose, 0.0, 0.0, 0.0, occupancy, paths)

@@ -12,6 +12,10 @@ removes mass only from the facings it could have seen, so a second look from the
 worth less than a look from a new side, and a cube is ruled out only once seen from enough sides.
 With one sector this is exactly eq. 4.
 
+Stereo sees more than the detector does: a cube it has seen empty (space in front of a visible
+surface) cannot hold the target's centre, whichever way the target faces. :meth:`rule_out_empty`
+folds that in once per cube, with a likelihood ``empty_factor`` > 0 for stereo's mistakes.
+
 Masses are stored scaled (``stored × scale`` is the probability) so that the normalisation of eq. 4
 costs one scalar instead of a pass over every cube. The planner also reads a coarse copy (cubes
 summed into ``coarse_factor``³ blocks) kept up to date by the same update.
@@ -37,6 +41,7 @@ class TargetBelief:
         self.coarse_factor = coarse_factor
         self.coarse_shape = tuple(-(-n // coarse_factor) for n in grid.shape)
         self._mass = np.zeros((*grid.shape, facing_sectors), np.float32)
+        self._seen_empty = np.zeros(grid.shape, np.bool_)
         self._coarse = np.zeros((*self.coarse_shape, facing_sectors), np.float64)
         self.success_prob = 0.0  # P[F], eq. 2
         self.set_prior(np.ones(grid.shape), prob_outside)
@@ -136,6 +141,35 @@ class TargetBelief:
         if not 1e-6 < self._scale < 1e6:  # keep stored values in float32's comfortable range
             self._renormalise()
         return left
+
+    # --- checkpoint ----------------------------------------------------------------------------------
+
+    def state(self) -> dict:
+        """Everything the belief holds (arrays not copied): :meth:`restore` of it is this belief, bit
+        for bit. The coarse copy is kept: updated incrementally, it differs from a rebuilt one."""
+        return {"mass": self._mass, "coarse": self._coarse, "outside": self._outside, "scale": self._scale,
+                "stored_total": self._stored_total, "success_prob": self.success_prob}
+
+    def restore(self, state: dict) -> None:
+        """Take back a :meth:`state` of a belief over the same grid, sectors and coarse factor."""
+        for name, own in (("mass", self._mass), ("coarse", self._coarse)):
+            given = np.asarray(state[name])
+            if given.shape != own.shape or given.dtype != own.dtype:
+                raise ValueError(f"belief {name}: expected {own.dtype} {own.shape}, got {given.dtype} {given.shape}")
+        self._mass[:] = state["mass"]
+        self._coarse[:] = state["coarse"]
+        self._outside, self._scale = float(state["outside"]), float(state["scale"])
+        self._stored_total, self.success_prob = float(state["stored_total"]), float(state["success_prob"])
+
+    def rule_out_empty(self, empty: np.ndarray, empty_factor: float) -> float:
+        """Cubes stereo has seen empty (grid-shaped bool) keep only ``empty_factor`` of their mass, all
+        facings alike; each cube once (the occupancy map already sums its evidence over the looks).
+        Returns the probability that left them."""
+        new = np.flatnonzero(np.asarray(empty, bool) & ~self._seen_empty)
+        self._seen_empty.flat[new] = True
+        if not len(new):
+            return 0.0
+        return self.observe(new, np.full((len(new), self.facing_sectors), empty_factor, np.float32))
 
     def mass_near(self, position_m: np.ndarray, radius_m: float) -> float:
         """Probability that the target's centre lies within ``radius_m`` of ``position_m``."""

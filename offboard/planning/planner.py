@@ -148,9 +148,9 @@ class SearchPlanner:
         if self.config.cost_function == 1:
             decision = self._eq9(values, look_t, far_t, here_covering, pose)
         else:
-            why, worth = self._why_move(values, look_t, far_t, path_lengths_m, here_covering, pose)
-            decision = (self._look_here(values, look_t, here_covering) if why is None else
-                        self._move(values, far_t, path_lengths_m, here_covering, pose, why, worth))
+            move, why, worth = self._why_move(values, look_t, far_t, path_lengths_m, here_covering, pose)
+            decision = (self._move(values, far_t, path_lengths_m, here_covering, pose, why, worth) if move else
+                        self._look_here(values, look_t, here_covering, why))
         if elapsed_s + decision.time_s > self.config.budget_s:
             return Decision("stop", f"the next action ({decision.time_s:.1f} s) would exceed the budget "
                                     f"K = {self.config.budget_s:g} s", status="budget",
@@ -160,24 +160,25 @@ class SearchPlanner:
     # --- the pieces --------------------------------------------------------------------------------
 
     def _why_move(self, values: ActionValues, look_t: np.ndarray, far_t: np.ndarray, path_lengths_m: np.ndarray,
-                  covering: float, pose: Pose2D) -> tuple[str | None, np.ndarray]:
-        """Why to leave the current position (None: look on here), and which candidates are worth
-        going to: those the robot would not leave again at once (the ``move_rule``)."""
+                  covering: float, pose: Pose2D) -> tuple[bool, str, np.ndarray]:
+        """Whether to leave the current position and why (the ``move_rule``), and which candidates
+        are worth going to: those the robot would not leave again at once."""
         here = values.detection_prob[-1]
         if self.config.move_rule == "threshold":
             worth = values.covering_prob[:-1] >= self.config.move_threshold
-            why = (f"covering probability here {covering:.3f} < Θ_move {self.config.move_threshold:g}"
-                   if covering < self.config.move_threshold else None)
+            move = covering < self.config.move_threshold
+            why = f"covering probability here {covering:.3f} {'<' if move else '≥'} Θ_move {self.config.move_threshold:g}"
         else:
             here_rate = float((here / look_t).max())
             visit = self._visit_rates(values, far_t, path_lengths_m, pose)
             worth = visit > here_rate
             j = int(np.argmax(visit))
+            move = bool(worth[j])
             why = (f"a visit to ({self.positions[j][0]:.2f}, {self.positions[j][1]:.2f}) finds {visit[j]:.4f}/s, "
-                   f"the best look here {here_rate:.4f}/s" if worth[j] else None)
-        if why is None and here.max() < self.config.min_detection_prob:
-            why = f"no look left here finds it with probability ≥ {self.config.min_detection_prob:g}"
-        return why, worth
+                   f"the best look here {here_rate:.4f}/s")
+        if not move and here.max() < self.config.min_detection_prob:
+            move, why = True, f"no look left here finds it with probability ≥ {self.config.min_detection_prob:g}"
+        return move, why, worth
 
     def _visit_rates(self, values: ActionValues, far_t: np.ndarray, path_lengths_m: np.ndarray,
                      pose: Pose2D) -> np.ndarray:
@@ -227,12 +228,12 @@ class SearchPlanner:
                                                              self.settings.tilt_rad)
         return times
 
-    def _look_here(self, values: ActionValues, look_t: np.ndarray, covering: float) -> Decision:
+    def _look_here(self, values: ActionValues, look_t: np.ndarray, covering: float, why: str) -> Decision:
         """Eq. 3: the look of largest E(f) = P_Ψ(f) / t(f) from where the robot stands."""
         detection = values.detection_prob[-1]
         utility = detection / look_t
         s = int(np.argmax(utility))
-        return Decision("look", f"covering probability here {covering:.3f} ≥ Θ_move {self.config.move_threshold:g}",
+        return Decision("look", why,
                         self.settings.azimuth_rad[s], self.settings.tilt_rad[s], None, float(detection[s]),
                         float(utility[s]), float(look_t[s]), covering_here=covering, values=values, setting=s)
 

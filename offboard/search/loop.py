@@ -61,6 +61,8 @@ class SearchConfig:
     false_positive_rate: float = field(default=0.005, metadata=bounds(1e-6, 0.5))  # α at least: 0 of 200 negatives
     weak_false_positive_rate: float = field(default=0.1, metadata=bounds(1e-6, 0.9))  # α of a weak detection
     detection_sigma_m: float = field(default=0.1, metadata=bounds(0.01, 2.0))  # located centre's error, near
+    empty_log_odds: float = field(default=-0.8, metadata=bounds(-20.0, 0.0))  # seen empty: no target centre there
+    empty_factor: float = field(default=0.05, metadata=bounds(0.0, 1.0))  # what such a cube keeps (stereo errs)
     behind_surface_m: float = field(default=0.12, metadata=bounds(0.0, 1.0))  # target centre behind its face
     max_actions: int = field(default=150, metadata=bounds(1, 10_000))
     planner: PlannerConfig = PlannerConfig()
@@ -128,14 +130,16 @@ class Search:
         self._pan_tilt = (math.radians(start.pan_deg), math.radians(start.tilt_deg))
         self._plans_positions = policy is None  # baselines keep the report's fixed grid
         self._pending_processing_s = 0.0  # planning done towards the coming look
+        self.on_action: Callable[[Search], None] | None = None  # after every action (the checkpoint)
 
     # --- the loop ------------------------------------------------------------------------------------
 
     def run(self) -> SearchState:
         started = time.monotonic()
-        pose = self._pose()
-        self.state.trail.append((pose.x_m, pose.y_m))
-        self.state.positions.append((pose.x_m, pose.y_m))
+        if not self.state.trail:  # a resumed search has its start already
+            pose = self._pose()
+            self.state.trail.append((pose.x_m, pose.y_m))
+            self.state.positions.append((pose.x_m, pose.y_m))
         if self.recorder:
             self.recorder.log_setup(self.config.room_m, self.intrinsics, self.mount)
         self._warm_up()
@@ -151,6 +155,8 @@ class Search:
                 self._move(decision)
             else:
                 self._look(decision)
+            if self.on_action:
+                self.on_action(self)
         self.wall_time_s = time.monotonic() - started
         return self.state
 
@@ -273,9 +279,13 @@ class Search:
             realised = self.belief.update_after_miss(footprint.cube_index, footprint.detection_prob)
             log.info("look %d: no target; it could have found it with probability %.3f; P[F] = %.3f",
                      self.state.actions, realised, self.belief.success_prob)
-            return realised, False
-        realised = self.belief.expected_detection(footprint.cube_index, footprint.detection_prob)
-        return realised, self._detected(obs, table, footprint)
+            found = False
+        else:
+            realised = self.belief.expected_detection(footprint.cube_index, footprint.detection_prob)
+            found = self._detected(obs, table, footprint)
+        empty = self.occupancy.observed & (self.occupancy.log_odds <= self.config.empty_log_odds)
+        self.belief.rule_out_empty(empty, self.config.empty_factor)  # what stereo saw through holds no target
+        return realised, found
 
     def _detected(self, obs: Observation, table: DetectabilityTable, footprint) -> bool:
         """Fold a detection into the belief; found once the belief is sure enough near it."""

@@ -138,3 +138,14 @@ def test_footprint_is_the_visible_part_of_the_view_inside_the_detector_range():
     # facing: a face pointing away from the camera (azimuth 0 = +x, the camera looks along +x) is never seen
     back = look_footprint(ROOM, cam, K, depth, 16, table, np.array([0.0, math.pi]), 0.1)
     assert (back.detection_prob[:, 0] == 0).all() and (back.detection_prob[:, 1] > 0).mean() > 0.8
+
+
+def test_space_seen_empty_loses_its_mass_once_whatever_the_facing():
+    belief = TargetBelief(GRID, facing_sectors=4, prob_outside=0.0)
+    empty = np.zeros(GRID.shape, bool)
+    empty[:10] = True  # half the room seen through
+    left = belief.rule_out_empty(empty, 0.05)
+    assert left == pytest.approx(0.5 * 0.95, abs=1e-6)  # of the probability before the update
+    assert belief.target_prob[:10].sum() == pytest.approx(0.025 / 0.525, rel=1e-5)
+    again = belief.rule_out_empty(empty, 0.05)  # the map still says empty: nothing new is learnt
+    assert again == 0.0 and belief.target_prob[:10].sum() == pytest.approx(0.025 / 0.525, rel=1e-5)
