@@ -1,85 +1,207 @@
-"""One contract for every device backend. The serial-hardware backend joins BACKENDS when it exists;
-the same tests must then pass against it (on the bench, or against its pseudo-terminal emulators)."""
+"""One contract for every device backend, built the way the agent builds it (``onboard.backends``):
+the simulator, and the hardware backend through the real serial drivers over the byte-level
+emulators on pseudo-terminals (``syt-onboard emulate``'s robot, in this process), its camera
+rendering the emulated truth. Move, stop while moving, stall, a refused limit, look, halt, capture
+and close: the same tests, the same assertions; only the simulator's exact times are held to a
+tighter tolerance than a real-time driver's, which polls."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import threading
 import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 
 import pytest
 
-from onboard.config import OnboardConfig, SimConfig
+from onboard.backends import build_robot
+from onboard.config import HardwareConfig, OnboardConfig, SimConfig
 from onboard.devices import Devices
-from onboard.sim.robot import build_sim_robot
+from onboard.emulators.robot import EmulatedRobot
+from onboard.hardware.pioneer import PioneerConfig
+from onboard.hardware.ptu import PtuConfig
+from shared.geometry import Pose2D
+from shared.world import World
 from onboard.sim.world import load_world
 
+# paper-lab, facing +x between the west shelf (its face 0.79 m behind) and the centre table
+START = (1.5, 2.5, 0.0)
 
-def _sim(realtime: bool) -> Devices:
+
+@dataclass
+class Rig:
+    devices: Devices
+    true_pose: Callable[[], Pose2D]
+    rel: float  # relative tolerance of durations: the simulator's are exact, a real-time driver polls
+    distance_m: float  # how close a drive ends to its goal
+
+
+def _world() -> World:
+    return load_world("paper-lab").with_start(*START)
+
+
+@contextlib.contextmanager
+def _sim(realtime: bool) -> Iterator[Rig]:
     config = dataclasses.replace(OnboardConfig(), sim=SimConfig(realtime=realtime))
-    return build_sim_robot(config, load_world("paper-lab").with_start(1.5, 2.5, 0.0)).devices
+    robot = build_robot(config, _world())
+    try:
+        yield Rig(robot.devices, lambda: robot.sim.true_pose, 0.02, 1e-6)
+    finally:
+        robot.devices.close()
 
 
-BACKENDS = {"sim": _sim}
+@contextlib.contextmanager
+def _hardware(realtime: bool) -> Iterator[Rig]:
+    """Real time whatever ``realtime`` says: the emulators run on the wall clock."""
+    base = OnboardConfig()
+    with EmulatedRobot(base, _world(), "paper-lab") as emulated:
+        ports = emulated.ports()
+        config = dataclasses.replace(base, backend="hardware", hardware=HardwareConfig(
+            PioneerConfig(port=ports["base"]), PtuConfig(port=ports["pantilt"], reply_timeout_s=0.2),
+            truth=ports["truth"]))
+        robot = build_robot(config, _world())
+        try:
+            yield Rig(robot.devices, lambda: emulated.truth().pose, 0.25, 0.03)
+        finally:
+            robot.devices.close()
 
 
-@pytest.fixture(params=sorted(BACKENDS))
-def devices(request):
-    made = BACKENDS[request.param](realtime=False)
-    yield made
-    made.close()
+BACKENDS = {"sim": _sim, "hardware": pytest.param(_hardware, marks=pytest.mark.integration)}
 
 
-@pytest.fixture(params=sorted(BACKENDS))
-def paced_devices(request):
-    made = BACKENDS[request.param](realtime=True)
-    yield made
-    made.close()
+@pytest.fixture(params=list(BACKENDS.values()), ids=list(BACKENDS))
+def rig(request) -> Iterator[Rig]:
+    with request.param(realtime=False) as made:
+        yield made
 
 
-def test_base_moves_and_reports(devices):
+@pytest.fixture(params=list(BACKENDS.values()), ids=list(BACKENDS))
+def paced_rig(request) -> Iterator[Rig]:
+    with request.param(realtime=True) as made:
+        yield made
+
+
+def _in_thread(call: Callable[[], object]) -> tuple[threading.Thread, list]:
+    result: list = []
+    thread = threading.Thread(target=lambda: result.append(call()))
+    thread.start()
+    return thread, result
+
+
+def test_base_moves_and_reports(rig):
+    devices = rig.devices
     start = devices.base.reading()
     assert not start.moving and not start.stalled
     outcome = devices.base.move(math.radians(90), 0.4, 0.3, threading.Event())
-    assert outcome.status == "done" and outcome.distance_m == pytest.approx(0.4, abs=1e-6)
+    assert outcome.status == "done" and outcome.distance_m == pytest.approx(0.4, abs=rig.distance_m)
     assert outcome.duration_s == pytest.approx(devices.base.limits.turn_time_s(math.radians(90))
-                                               + devices.base.limits.drive_time_s(0.4, 0.3), rel=0.02)
+                                               + devices.base.limits.drive_time_s(0.4, 0.3), rel=rig.rel)
     end = devices.base.reading()
     assert end.pose.y_m - start.pose.y_m == pytest.approx(0.4, abs=0.05) and not end.moving
+    truth = rig.true_pose()
+    assert (truth.x_m, truth.y_m) == pytest.approx((1.5, 2.9), abs=0.06)
 
 
-def test_base_stop_from_another_thread_interrupts_a_motion(paced_devices):
-    base = paced_devices.base
-    result = []
-    mover = threading.Thread(target=lambda: result.append(base.move(0.0, 3.0, 0.3, threading.Event())))
-    mover.start()
-    time.sleep(0.5)
+def test_base_stop_from_another_thread_interrupts_a_motion(paced_rig):
+    base = paced_rig.devices.base
+    mover, result = _in_thread(lambda: base.move(0.0, 3.0, 0.3, threading.Event()))
+    time.sleep(0.8)
     assert base.reading().moving
     base.stop()
-    mover.join(timeout=2.0)
+    mover.join(timeout=3.0)
     assert result and result[0].status == "stopped" and 0.0 < result[0].distance_m < 0.5
+    assert _comes_to_rest(paced_rig)
     assert not base.reading().moving
 
 
-def test_pan_tilt_reaches_its_limits(devices):
-    limits = devices.pantilt.limits
-    duration = devices.pantilt.look(math.radians(limits.pan_max_deg), math.radians(limits.tilt_min_deg), threading.Event())
-    head = devices.pantilt.reading()
-    assert math.degrees(head.pan_rad) == pytest.approx(limits.pan_max_deg)
-    assert math.degrees(head.tilt_rad) == pytest.approx(limits.tilt_min_deg)
-    assert duration == pytest.approx(limits.slew_time_s(limits.pan_max_deg, limits.tilt_min_deg), rel=0.02)
+def test_base_stalls_against_a_shelf(rig):
+    outcome = rig.devices.base.move(0.0, -1.5, 0.4, threading.Event())
+    assert outcome.status == "stalled" and outcome.distance_m < 1.0
+    assert rig.true_pose().x_m == pytest.approx(0.45 + rig.devices.base.limits.radius_m, abs=0.03)
 
 
-def test_camera_gives_a_rectified_pair_of_the_declared_size(devices):
-    pair = devices.camera.capture()
-    k = devices.camera.intrinsics
+def test_limits_refuse_what_the_device_cannot_reach(rig):
+    """The agent checks every command against these before anything moves (codes ``limit``)."""
+    head, base = rig.devices.pantilt.limits, rig.devices.base.limits
+    assert head.pan_max_deg <= 159.0 and head.tilt_min_deg >= -47.0  # never wider than the PTU-D46
+    assert head.check(head.pan_max_deg + 0.5, 0.0).startswith("pan_deg=")
+    assert head.check(0.0, head.tilt_min_deg - 0.5).startswith("tilt_deg=")
+    assert head.check(head.pan_max_deg, head.tilt_min_deg) is None
+    assert base.max_speed_m_s == OnboardConfig().base.max_speed_m_s
+
+
+def test_pan_tilt_reaches_its_limits(rig):
+    head_limits = rig.devices.pantilt.limits
+    pan, tilt = head_limits.pan_max_deg, head_limits.tilt_min_deg
+    duration = rig.devices.pantilt.look(math.radians(pan), math.radians(tilt), threading.Event())
+    head = rig.devices.pantilt.reading()
+    assert math.degrees(head.pan_rad) == pytest.approx(pan, abs=0.06)  # within a PTU position
+    assert math.degrees(head.tilt_rad) == pytest.approx(tilt, abs=0.06) and not head.moving
+    assert duration == pytest.approx(head_limits.slew_time_s(pan, tilt), rel=rig.rel)
+
+
+def test_pan_tilt_halts_midway(paced_rig):
+    pantilt = paced_rig.devices.pantilt
+    looker, result = _in_thread(lambda: pantilt.look(math.radians(120.0), 0.0, threading.Event()))
+    time.sleep(0.6)
+    pantilt.halt()
+    looker.join(timeout=3.0)
+    assert result and result[0] < 1.5
+    head = pantilt.reading()
+    assert 5.0 < math.degrees(head.pan_rad) < 100.0 and not head.moving
+
+
+def test_camera_gives_a_rectified_pair_of_the_declared_size(rig):
+    pair = rig.devices.camera.capture()
+    k = rig.devices.camera.intrinsics
     assert pair.left.shape == pair.right.shape == (k.height_px, k.width_px, 3)
     assert pair.left.dtype == pair.right.dtype == "uint8"
-    assert devices.camera.mount.baseline_m > 0
+    assert rig.devices.camera.mount.baseline_m > 0
 
 
-def test_clock_advances_with_actions(devices):
-    before = devices.clock.now_s()
-    devices.base.move(0.0, 0.5, 0.4, threading.Event())
-    assert devices.clock.now_s() - before >= devices.base.limits.drive_time_s(0.5, 0.4) * 0.99
+def test_the_camera_sees_where_the_robot_truly_looks(rig):
+    """Turned to face the shelf behind it, the view changes: the camera follows the true pose."""
+    before = rig.devices.camera.capture().left
+    rig.devices.pantilt.look(math.radians(150.0), 0.0, threading.Event())
+    after = rig.devices.camera.capture().left
+    assert abs(float(before.mean()) - float(after.mean())) > 2.0 or (before != after).mean() > 0.5
+
+
+def test_clock_advances_with_actions(rig):
+    before = rig.devices.clock.now_s()
+    rig.devices.base.move(0.0, 0.5, 0.4, threading.Event())
+    assert rig.devices.clock.now_s() - before >= rig.devices.base.limits.drive_time_s(0.5, 0.4) * (1 - rig.rel)
+
+
+def test_close_stops_a_moving_base(paced_rig):
+    devices = paced_rig.devices
+    mover, result = _in_thread(lambda: _move_or_fault(devices))
+    time.sleep(0.8)
+    devices.close()
+    mover.join(timeout=3.0)
+    assert result and result[0] in ("stopped", "fault")
+    assert _comes_to_rest(paced_rig)
+
+
+def _comes_to_rest(rig: Rig, within_s: float = 2.0) -> bool:
+    """The true pose stops changing within ``within_s`` (a Pioneer decelerates at 0.3 m/s²)."""
+    deadline = time.monotonic() + within_s
+    last = rig.true_pose()
+    while time.monotonic() < deadline:
+        time.sleep(0.25)
+        now = rig.true_pose()
+        if now == last:
+            return True
+        last = now
+    return False
+
+
+def _move_or_fault(devices: Devices) -> str:
+    """A long drive's end: stopped, or a fault once the port is gone."""
+    try:
+        return devices.base.move(0.0, 3.0, 0.3, threading.Event()).status
+    except Exception:
+        return "fault"
