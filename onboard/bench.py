@@ -1,4 +1,6 @@
-"""``syt-onboard bench --json``: rendering and round trips over Zenoh on loopback, as medians.
+"""``syt-onboard bench --json``: rendering and round trips over Zenoh on loopback, as medians;
+``--backend hardware``: the Pioneer driver's command and stop latencies to the wire and its SIP
+parsing, over the emulator (or a real robot's port).
 
 The round trips go to a real agent subprocess, so they include Zenoh, msgpack, the agent's
 dispatch and (for captures) rendering: what a planner on the same machine would wait for.
@@ -45,6 +47,20 @@ def _roundtrips_ms(repeats: int) -> dict[str, float]:
                 "capture_roundtrip_ms": median_ms(ask(keys.capture, m.CaptureCommand, m.Capture), repeats),
                 "state_roundtrip_ms": median_ms(ask(keys.state, m.StateRequest, m.StateReply), repeats * 10),
             }
+
+
+def run_hardware(port: str | None = None, moves: int = 10) -> str:
+    """The Pioneer driver's figures (``onboard.hardware.bench``) on ``port``, or over the emulated robot
+    of ``syt-onboard emulate`` in paper-lab when no port is given."""
+    from onboard.emulators.robot import EmulatedRobot
+    from onboard.hardware import bench as pioneer_bench
+
+    config = OnboardConfig()
+    if port is not None:
+        return json.dumps(pioneer_bench.run(port, config.base, moves))
+    with EmulatedRobot(config, load_world("paper-lab"), "paper-lab") as emulated:
+        figures = pioneer_bench.run(emulated.ports()["base"], config.base, moves)
+    return json.dumps(figures | {"port": "emulator"})
 
 
 def run(repeats: int = 30) -> str:

@@ -2,7 +2,7 @@
 
     syt-onboard --backend sim --world paper-lab [--start X,Y,HEADING_DEG] [--target X,Y,Z,YAW_DEG]
     syt-onboard render --world FILE [--start ..] [--pan DEG] [--tilt DEG] --out DIR
-    syt-onboard bench --json
+    syt-onboard bench [--backend hardware [--port PORT]] --json
     syt-onboard picture NAME --out FILE.png          a built-in picture (the target's) for the planner
     syt-onboard worlds generate --count N --seed S --out DIR     checked rooms room-S-K.toml
     syt-onboard emulate --world NAME_OR_FILE         a Pioneer and a PTU-D46 on pseudo-terminals (JSON line)
@@ -132,10 +132,20 @@ def run_bench(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="syt-onboard bench", description="Measure the onboard side.")
     parser.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")
     parser.add_argument("--repeats", type=int, default=30)
+    parser.add_argument("--backend", choices=("sim", "hardware"), default="sim",
+                        help="sim: render and round trips; hardware: the Pioneer driver's latencies (over the emulator)")
+    parser.add_argument("--port", help="hardware: a real Pioneer's port or URL instead of the emulator")
     args = parser.parse_args(argv)
     _setup_logging(False)
-    from onboard.bench import run
+    from onboard.bench import run, run_hardware
 
+    if args.backend == "hardware":
+        try:
+            sys.stdout.write(run_hardware(args.port) + "\n")
+        except RuntimeError as exc:  # DeviceFault: nothing answers on the port
+            log.error("%s", exc)
+            return 1
+        return 0
     sys.stdout.write(run(args.repeats) + "\n")
     return 0
 
