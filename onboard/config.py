@@ -2,7 +2,7 @@
 
 ```toml
 backend = "sim"
-watchdog_ms = 1000
+watchdog_ms = 800
 [base]            # shared.limits.BaseLimits
 max_speed_m_s = 1.2
 [pantilt]         # shared.limits.PanTiltLimits
@@ -96,7 +96,7 @@ class HardwareConfig:
 @dataclass(frozen=True)
 class OnboardConfig:
     backend: Literal["sim", "hardware"] = "sim"  # hardware: [hardware] below
-    watchdog_ms: int = field(default=1000, metadata=bounds(50, 60_000))  # stop if the planner is silent
+    watchdog_ms: int = field(default=800, metadata=bounds(50, 60_000))  # stop if the planner is silent (4 heartbeats)
     publish_hz: float = field(default=10.0, metadata=bounds(0.1, 200.0))  # odometry and pan/tilt
     base: BaseLimits = BaseLimits()
     pantilt: PanTiltLimits = PanTiltLimits()

@@ -296,7 +296,7 @@ def run(trials: int = 20, lease_ms: int = DEFAULT_LEASE_MS, load: bool = False) 
     """The bench's JSON object (see the module docstring)."""
     with tempfile.TemporaryDirectory() as tmp, ExitStack() as stack:
         agent = realtime_agent(stack, Path(tmp), lease_ms)
-        result = summarize(run_trials(agent, trials, lease_ms), lease_ms, _watchdog_ms(agent))
+        result = summarize(run_trials(agent, trials, lease_ms), lease_ms, watchdog_ms(agent))
         if load:
             from offboard.bench.load import measure_load
 
@@ -304,6 +304,7 @@ def run(trials: int = 20, lease_ms: int = DEFAULT_LEASE_MS, load: bool = False) 
     return result
 
 
-def _watchdog_ms(agent: LoopbackAgent) -> int:
+def watchdog_ms(agent: LoopbackAgent) -> int:
+    """The agent's watchdog, as its ``info`` reply states it."""
     with observer_transport(agent).open() as session:
         return request(session, RobotKeys("syt").info, m.InfoRequest("bench-info"), m.Info, 5.0).watchdog_ms

@@ -222,7 +222,7 @@ def test_the_watchdog_stops_a_silent_planner(tmp_path, box_world):
         with client_transport(agent).open() as session:
             odometry = session.declare_subscriber(keys.odometry, zenoh.handlers.RingChannel(1))
             session.get(keys.move, payload=encode(m.MoveCommand("silent", distance_m=4.0, speed_m_s=0.3)), timeout=30.0)
-            time.sleep(2.5)  # watchdog is 1 s; publications do not count as planner contact
+            time.sleep(2.5)  # watchdog is 0.8 s; publications do not count as planner contact
             last = decode(odometry.recv().payload.to_bytes(), m.Odometry)
             assert not last.moving
             assert 0.0 < last.pose.x_m - 0.5 < 0.6
