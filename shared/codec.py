@@ -8,6 +8,7 @@ and the value, so a malformed message can be answered instead of crashing the pr
 
 from __future__ import annotations
 
+import math
 from typing import Any, Literal, TypeVar
 
 import cv2
@@ -48,7 +49,7 @@ def decode(payload: bytes, *expected: type[T]) -> T:
         raise ProtocolError("", payload[:16], f"not a msgpack payload ({exc.__class__.__name__})") from None
     if not isinstance(envelope, dict) or set(envelope) != {"schema", "type", "body"}:
         raise ProtocolError("", envelope, "expected a map with exactly schema, type and body")
-    if envelope["schema"] != SCHEMA_VERSION:
+    if type(envelope["schema"]) is not int or envelope["schema"] != SCHEMA_VERSION:  # not True, not 1.0
         raise ProtocolError("schema", envelope["schema"], f"unsupported schema version (this side speaks {SCHEMA_VERSION})")
     cls = MESSAGE_TYPES.get(envelope["type"]) if isinstance(envelope["type"], str) else None
     if cls is None or (expected and cls not in expected):
@@ -83,12 +84,15 @@ def _decode_array(value: Any, where: str) -> np.ndarray:
     if not isinstance(data, bytes):
         raise ProtocolError(f"{where}.data", type(data).__name__, "must be bytes")
     if encoding == "raw":
-        expected = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        expected = math.prod(shape) * np.dtype(dtype).itemsize  # Python ints: np.prod wraps around
         if len(data) != expected:
             raise ProtocolError(f"{where}.data", f"{len(data)} bytes", f"shape {shape} of {dtype} needs {expected} bytes")
         return np.frombuffer(data, dtype=dtype).reshape(shape)
     if encoding == "png":
-        array = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        try:
+            array = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        except cv2.error:  # raised for some garbage (an empty buffer) instead of returning None
+            array = None
         if array is None or list(array.shape) != shape or str(array.dtype) != dtype:
             got = None if array is None else f"{array.dtype} {list(array.shape)}"
             raise ProtocolError(f"{where}.data", got, f"PNG does not decode to {dtype} {shape}")

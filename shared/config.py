@@ -27,7 +27,7 @@ def load_config(cls: type[T], path: Path | None = None, overrides: dict[str, Any
             data = tomllib.loads(Path(path).read_text())
         except OSError as exc:
             raise ConfigError(str(path), None, f"cannot read the config file: {exc.strerror}") from None
-        except tomllib.TOMLDecodeError as exc:
+        except (ValueError, RecursionError) as exc:  # TOMLDecodeError, bad UTF-8, a 4300-digit integer, deep nesting
             raise ConfigError(str(path), None, f"not valid TOML: {exc}") from None
     for dotted, value in (overrides or {}).items():
         _set_dotted(data, dotted, value)

@@ -131,9 +131,13 @@ def _convert_scalar(tp: Any, value: Any, where: str, error: type[StructureError]
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise error(where, value, "expected a number")
-        if not math.isfinite(value):
+        try:
+            number = float(value)
+        except OverflowError:  # a TOML integer has no size limit
+            raise error(where, value, "too large for a number") from None
+        if not math.isfinite(number):
             raise error(where, value, "must be finite")
-        return float(value)
+        return number
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise error(where, value, "expected an integer")

@@ -230,7 +230,8 @@ def load_world(path_or_name: str | Path, *, robot_radius_m: float = DEFAULT_ROBO
         raise WorldError(f"{path}: cannot read world file ({exc})") from exc
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:  # its message carries "(at line L, column C)"
+    except (ValueError, RecursionError) as exc:  # TOMLDecodeError carries "(at line L, column C)";
+        # tomllib also raises ValueError for an integer of over 4300 digits, RecursionError for deep nesting
         raise WorldError(f"{path}: TOML syntax error: {exc}") from exc
     try:
         return parse_world(data, path.parent, robot_radius_m=robot_radius_m)
@@ -353,9 +354,13 @@ def _string(value: Any, key: str) -> str:
 def _number(value: Any, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise WorldError(f"{key}: must be a number, got {value!r}")
-    if not math.isfinite(value):
+    try:
+        number = float(value)
+    except OverflowError:  # a TOML integer has no size limit
+        raise WorldError(f"{key}: too large for a number, got {value!r}") from None
+    if not math.isfinite(number):
         raise WorldError(f"{key}: must be finite, got {value!r}")
-    return float(value)
+    return number
 
 
 def _sides(value: Any) -> int:
