@@ -3,11 +3,10 @@
     syt-offboard search --connect ENDPOINT --target-picture P --target-size X,Y,Z --out DIR [...]
     syt-offboard demo [--world paper-lab] [--out demo-out]   a simulated robot and a search, two processes
     syt-offboard tour --connect ENDPOINT --out DIR           a short scripted drive, saving the images
-    syt-offboard bench perception|planner|navigation --json
+    syt-offboard bench perception|planner|navigation|checkpoint --json
     syt-offboard bench safety --json [--load] [--trials N]  stop latencies when the planner is lost
     syt-offboard calibrate-detector --detector sift --target-picture P --out TABLE.json
     syt-offboard experiment --preset paper --out DIR [--baselines] [--jobs N]
-    syt-offboard fuzz --cases N [--json]            every decoder; --live: malformed queries to an agent
 """
 
 from __future__ import annotations
@@ -29,8 +28,8 @@ log = logging.getLogger("syt.offboard")
 # --- search ----------------------------------------------------------------------------------------
 
 def _add_search_args(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--target-picture", action="append", type=Path, required=True, metavar="PATH",
-                        help="a picture of the target's textured face (repeatable)")
+    parser.add_argument("--target-picture", action="append", type=Path, metavar="PATH",
+                        help="a picture of the target's textured face (repeatable; required unless --resume)")
     parser.add_argument("--target-size", type=floats(3, "--target-size", positive=True), default=(0.23, 0.23, 0.23),
                         metavar="X,Y,Z", help="target extents in metres; the picture covers the Y × Z face")
     parser.add_argument("--target-sides", type=int, choices=(1, 4), default=1,
@@ -47,6 +46,8 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
                         help="a detector's measured detectability table (from calibrate-detector)")
     parser.add_argument("--config", type=Path, metavar="FILE.toml", help="search configuration (SearchConfig)")
     parser.add_argument("--out", type=Path, default=Path("search-out"), metavar="DIR")
+    parser.add_argument("--resume", type=Path, metavar="DIR",
+                        help="carry on the search checkpointed in DIR (its own options; transport flags override)")
     parser.add_argument("--spawn", action="store_true", help="stream the recording to a new Rerun viewer")
     parser.add_argument("--connect-viewer", metavar="URL", help="stream the recording to a running Rerun viewer")
 
@@ -54,6 +55,10 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
 def _search(args: argparse.Namespace) -> int:
     from offboard.search.run import SearchRequest, run_search
 
+    if args.resume:
+        return _resume(args)
+    if not args.target_picture:
+        raise SystemExit("syt-offboard search: --target-picture is required (or --resume DIR)")
     request = SearchRequest(
         pictures=tuple(args.target_picture), target_size_m=args.target_size, target_sides=args.target_sides,
         room_m=args.room, cost=args.cost,
@@ -61,6 +66,23 @@ def _search(args: argparse.Namespace) -> int:
         detector=args.detector, detectability=tuple(args.detectability), config_path=args.config, out_dir=args.out,
         spawn=args.spawn, viewer_url=args.connect_viewer)
     summary = run_search(transport_from_args(args), request)
+    sys.stdout.write(json.dumps(summary) + "\n")
+    return 0 if summary["found"] else 3
+
+
+def _resume(args: argparse.Namespace) -> int:
+    """Carry on from ``--resume DIR``: the checkpoint's request and transport (flags given replace the
+    latter), the robot's odometry continuing; the summary covers the whole search."""
+    from offboard.search.checkpoint import CheckpointError, read
+    from offboard.search.run import run_search
+
+    try:
+        checkpoint = read(args.resume)
+    except CheckpointError as exc:
+        raise SystemExit(f"syt-offboard search --resume: {exc}") from None
+    given = transport_from_args(args)
+    summary = run_search(checkpoint.transport if given == TransportConfig() else given, checkpoint.request,
+                         resume=checkpoint)
     sys.stdout.write(json.dumps(summary) + "\n")
     return 0 if summary["found"] else 3
 
@@ -168,7 +190,9 @@ def _bench(args: argparse.Namespace) -> int:
 
         sys.stdout.write(json.dumps(run(args.trials, args.lease_ms, args.load)) + "\n")
         return 0
-    if args.what == "planner":
+    if args.what == "checkpoint":
+        from offboard.bench.checkpoint import run
+    elif args.what == "planner":
         from offboard.bench.planner import run
     elif args.what == "perception":
         from offboard.bench.perception import run
@@ -210,17 +234,12 @@ def _parser() -> argparse.ArgumentParser:
     harness.add_arguments(experiment)
     experiment.set_defaults(func=_experiment)
     bench = sub.add_parser("bench", help="measure a part; prints one JSON object")
-    bench.add_argument("what", choices=("perception", "planner", "navigation", "safety"))
+    bench.add_argument("what", choices=("perception", "planner", "navigation", "safety", "checkpoint"))
     bench.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")
     bench.add_argument("--trials", type=int, default=20, help="safety: trials of each fault")
     bench.add_argument("--lease-ms", type=int, default=DEFAULT_LEASE_MS, help="safety: the Zenoh link lease")
     bench.add_argument("--load", action="store_true", help="safety: also measure under load (4 state clients)")
     bench.set_defaults(func=_bench)
-    from offboard.fuzz import command as fuzz  # its options live with it
-
-    fuzzing = sub.add_parser("fuzz", help="fuzz every decoder (hypothesis), or a running agent with --live")
-    fuzz.add_arguments(fuzzing)
-    fuzzing.set_defaults(func=fuzz.main)
     return parser
 
 

@@ -343,6 +343,25 @@ class PoseTracker:
         self._set_offset(odom)
         return True
 
+    def state(self) -> dict:
+        """The estimate as plain numbers (a checkpoint); :meth:`restore` gives it back exactly. The
+        offset is kept as it is: it was set at the last correction, not at the last odometry."""
+        def plain(p: Pose2D) -> list[float]:
+            return [float(p.x_m), float(p.y_m), float(p.heading_rad)]
+
+        return {"odom": plain(self._odom), "pose": plain(self.pose),
+                "covariance": np.asarray(self.covariance, np.float64).tolist(),
+                "rotation": float(self._rotation), "translation": [float(v) for v in self._translation]}
+
+    def restore(self, state: dict) -> None:
+        """Take back a :meth:`state`; the robot's odometry carries on from where it was then."""
+        covariance = np.array(state["covariance"], np.float64)
+        if covariance.shape != (3, 3):
+            raise ValueError(f"pose tracker covariance: expected 3 × 3, got {covariance.shape}")
+        self._odom, self.pose = Pose2D(*state["odom"]), Pose2D(*state["pose"])
+        self.covariance = covariance
+        self._rotation, self._translation = float(state["rotation"]), tuple(float(v) for v in state["translation"])
+
     def _set_offset(self, odom: Pose2D) -> None:
         """``world_from_odom`` such that ``odom`` maps to ``self.pose``."""
         self._rotation = wrap_angle(self.pose.heading_rad - odom.heading_rad)

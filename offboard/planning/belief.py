@@ -147,17 +147,18 @@ class TargetBelief:
     def state(self) -> dict:
         """Everything the belief holds (arrays not copied): :meth:`restore` of it is this belief, bit
         for bit. The coarse copy is kept: updated incrementally, it differs from a rebuilt one."""
-        return {"mass": self._mass, "coarse": self._coarse, "outside": self._outside, "scale": self._scale,
-                "stored_total": self._stored_total, "success_prob": self.success_prob}
+        return {"mass": self._mass, "coarse": self._coarse, "seen_empty": self._seen_empty, "outside": self._outside,
+                "scale": self._scale, "stored_total": self._stored_total, "success_prob": self.success_prob}
 
     def restore(self, state: dict) -> None:
         """Take back a :meth:`state` of a belief over the same grid, sectors and coarse factor."""
-        for name, own in (("mass", self._mass), ("coarse", self._coarse)):
+        for name, own in (("mass", self._mass), ("coarse", self._coarse), ("seen_empty", self._seen_empty)):
             given = np.asarray(state[name])
             if given.shape != own.shape or given.dtype != own.dtype:
                 raise ValueError(f"belief {name}: expected {own.dtype} {own.shape}, got {given.dtype} {given.shape}")
         self._mass[:] = state["mass"]
         self._coarse[:] = state["coarse"]
+        self._seen_empty[:] = state["seen_empty"]
         self._outside, self._scale = float(state["outside"]), float(state["scale"])
         self._stored_total, self.success_prob = float(state["stored_total"]), float(state["success_prob"])
 

@@ -12,6 +12,7 @@ import logging
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from offboard.planning import priors
 from offboard.perception.detectability import DetectabilityTable
@@ -24,6 +25,9 @@ from offboard.perception.voxel_grid import VoxelGrid
 from shared.config import load_config
 from shared.geometry import Intrinsics
 from shared.transport import TransportConfig
+
+if TYPE_CHECKING:
+    from offboard.search.checkpoint import Checkpoint
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +49,7 @@ class SearchRequest:
     spawn: bool = False
     viewer_url: str | None = None
     record: bool = True  # write search.rrd (experiments turn it off to save time and disk)
+    checkpoint: bool = True  # write checkpoint.syt after every action (for --resume)
 
 
 def search_config(request: SearchRequest) -> SearchConfig:
@@ -91,23 +96,26 @@ def dynamic_priors(specs: tuple[str, ...], grid: VoxelGrid, model: TargetModel) 
     return made
 
 
-def run_search(transport: TransportConfig, request: SearchRequest, policy=None, detector_cache: dict | None = None) -> dict:
+def run_search(transport: TransportConfig, request: SearchRequest, policy=None, detector_cache: dict | None = None,
+               resume: Checkpoint | None = None) -> dict:
     """Run one search; ``policy`` (a factory taking the SearchPlanner) replaces the SYT decisions.
     ``detector_cache`` keeps the detectors (and their tables) for later searches of the same target
-    with the same camera: building a SIFT model takes seconds."""
+    with the same camera: building a SIFT model takes seconds. ``resume``: carry on from a
+    checkpoint (the log is appended to, the recording goes to a new file)."""
     out = request.out_dir
     out.mkdir(parents=True, exist_ok=True)
-    file_log = logging.FileHandler(out / "search.log", mode="w")
+    file_log = logging.FileHandler(out / "search.log", mode="a" if resume else "w")
     file_log.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     root = logging.getLogger()
     root.addHandler(file_log)
     recorder = None
     if request.record or request.spawn or request.viewer_url:
-        recorder = Recorder(out / "search.rrd" if request.record else None, spawn=request.spawn,
+        rrd = "search.rrd" if resume is None else f"search-resumed-{resume.actions}.rrd"
+        recorder = Recorder(out / rrd if request.record else None, spawn=request.spawn,
                             connect_url=request.viewer_url)
         recorder.attach_logging(root)
     try:
-        config = search_config(request)
+        config = search_config(request) if resume is None else resume.config
         model = TargetModel.from_files(request.pictures, request.target_size_m)
         with transport.open() as session, RobotClient(session, transport.robot_id) as robot:
             info = robot.wait_for_robot()
@@ -121,10 +129,16 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
             static = [p for p in request.priors if p.split(":")[0] in ("uniform", "hints", "last-seen")]
             search = Search(robot, config, detectors, build_prior(grid, static),
                             dynamic_priors(request.priors, grid, model), recorder, model.size_m[0], policy)
+            if request.checkpoint or resume:
+                from offboard.search.checkpoint import attach  # (it imports this module)
+
+                attach(search, request, transport, resume)
             try:
                 search.run()
             finally:
                 robot.stop()
+            if resume:
+                search.wall_time_s += resume.wall_time_s  # the summary covers the whole search
             summary = {**search.summary(), "prior": "+".join(request.priors)}
             search.write_top_view(out / "search.png")
             (out / "looks.jsonl").write_text("".join(json.dumps(look) + "\n" for look in search.state.look_log))

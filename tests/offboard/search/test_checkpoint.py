@@ -1,0 +1,186 @@
+"""Checkpoint and resume: the file gives back the belief, the map and the tracker bit for bit, and a
+search whose planner is SIGKILLed carries on with ``--resume`` and finds the target."""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from offboard.bench.safety import Observer
+from offboard.navigation.localization import PoseTracker
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.perception.voxel_grid import VoxelGrid
+from offboard.planning.belief import TargetBelief
+from offboard.search import checkpoint
+from offboard.search.checkpoint import CheckpointError
+from offboard.search.run import SearchRequest
+from shared.geometry import Pose2D
+from shared.launch import onboard_agent
+from shared.transport import TransportConfig
+
+GRID = VoxelGrid((2.0, 1.5, 1.0), 0.1)
+
+
+def _looked_at(seed: int) -> tuple[TargetBelief, OccupancyGrid]:
+    """A belief after misses that each saw part of the grid from some facings, and a map with hits."""
+    rng = np.random.default_rng(seed)
+    belief = TargetBelief(GRID, facing_sectors=8, prob_outside=0.05, coarse_factor=2)
+    for _ in range(6):
+        seen = rng.choice(GRID.num_cubes, size=GRID.num_cubes // 3, replace=False)
+        b = np.where(rng.uniform(size=(seen.size, 8)) < 0.4, rng.choice([0.2, 0.5, 0.9], (seen.size, 8)), 0.0)
+        belief.update_after_miss(seen, b)
+    belief.rule_out_empty(rng.uniform(size=GRID.shape) < 0.2, 0.05)
+    occupancy = OccupancyGrid(GRID)
+    occupancy.log_odds.flat[rng.choice(GRID.num_cubes, 300)] = rng.uniform(-2, 3.5, 300).astype(np.float32)
+    occupancy.observed[occupancy.log_odds != 0] = True
+    occupancy.observed.flat[:40] = True  # observed, log-odds back at exactly 0
+    return belief, occupancy
+
+
+def _saved_and_read(tmp_path: Path, belief: TargetBelief, occupancy: OccupancyGrid) -> checkpoint.Checkpoint:
+    header, arrays = checkpoint.encode_maps(belief.state(), occupancy.log_odds, occupancy.observed)
+    checkpoint.write_file(tmp_path / checkpoint.FILE_NAME, header, arrays)
+    return checkpoint.read(tmp_path)
+
+
+def test_the_belief_and_the_map_read_back_bit_for_bit(tmp_path):
+    belief, occupancy = _looked_at(1)
+    state, odds, observed = checkpoint.decode_maps(_saved_and_read(tmp_path, belief, occupancy))
+    saved = belief.state()
+    for name in ("mass", "coarse", "seen_empty"):
+        assert state[name].dtype == saved[name].dtype and np.array_equal(state[name], saved[name])
+    assert {k: state[k] for k in ("outside", "scale", "stored_total", "success_prob")} == \
+        {k: saved[k] for k in ("outside", "scale", "stored_total", "success_prob")}
+    assert np.array_equal(odds.view(np.uint32), occupancy.log_odds.view(np.uint32))
+    assert np.array_equal(observed, occupancy.observed)
+
+
+def test_a_restored_belief_goes_on_exactly_as_the_original(tmp_path):
+    belief, occupancy = _looked_at(2)
+    state, _, _ = checkpoint.decode_maps(_saved_and_read(tmp_path, belief, occupancy))
+    resumed = TargetBelief(GRID, facing_sectors=8, prob_outside=0.05, coarse_factor=2)
+    resumed.restore(state)
+    seen = np.arange(0, GRID.num_cubes, 3)
+    b = np.full((seen.size, 8), 0.3, np.float32)
+    assert resumed.update_after_miss(seen, b) == belief.update_after_miss(seen, b)
+    empty = np.random.default_rng(5).uniform(size=GRID.shape) < 0.3  # partly seen empty before: once per cube
+    assert resumed.rule_out_empty(empty, 0.05) == belief.rule_out_empty(empty, 0.05)
+    assert np.array_equal(resumed.state()["mass"], belief.state()["mass"])
+    assert np.array_equal(resumed.coarse_mass(), belief.coarse_mass())
+    assert resumed.success_prob == belief.success_prob and resumed.prob_outside == belief.prob_outside
+
+
+def test_a_belief_of_another_shape_is_refused():
+    belief, _ = _looked_at(3)
+    other = TargetBelief(GRID, facing_sectors=4, prob_outside=0.05, coarse_factor=2)
+    with pytest.raises(ValueError, match="belief mass"):
+        other.restore(belief.state())
+
+
+def test_the_pose_tracker_comes_back_with_its_correction():
+    tracker = PoseTracker(Pose2D(0.0, 0.0, 0.0))
+    tracker.predict(Pose2D(1.0, 0.1, 0.2))
+    assert tracker.correct(Pose2D(1.0, 0.1, 0.2), Pose2D(1.05, 0.12, 0.22), np.diag([1e-3, 1e-3, 1e-3]))
+    tracker.predict(Pose2D(1.5, 0.2, 0.3))  # odometry after the correction: the offset stays
+    resumed = PoseTracker(Pose2D(9.0, 9.0, 1.0))
+    resumed.restore(json.loads(json.dumps(tracker.state())))
+    later = Pose2D(2.0, 0.5, 0.4)
+    assert resumed.world_pose(later) == tracker.world_pose(later)
+    assert resumed.predict(later) == tracker.predict(later)
+    assert np.array_equal(resumed.covariance, tracker.covariance)
+
+
+def test_the_request_comes_back_with_absolute_paths(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    request = SearchRequest(pictures=(Path("t.png"),), target_size_m=(0.2, 0.2, 0.3), room_m=(9.0, 5.0, 2.5),
+                            priors=("uniform", "surfaces"), detectability=("sift=tables/s.json",),
+                            out_dir=Path("out"), move_threshold=0.2)
+    back = checkpoint.request_from_plain(json.loads(json.dumps(checkpoint.request_plain(request))))
+    assert back.pictures == (tmp_path / "t.png",) and back.out_dir == tmp_path / "out"
+    assert back.detectability == (f"sift={tmp_path / 'tables/s.json'}",)
+    assert back == SearchRequest(**{**request.__dict__, "pictures": back.pictures, "out_dir": back.out_dir,
+                                    "detectability": back.detectability})
+
+
+def test_damaged_checkpoints_are_refused_naming_the_problem(tmp_path):
+    belief, occupancy = _looked_at(4)
+    _saved_and_read(tmp_path, belief, occupancy)
+    path = tmp_path / checkpoint.FILE_NAME
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(CheckpointError, match="ends before"):
+        checkpoint.read(tmp_path)
+    path.write_bytes(b"PK\x03\x04" + data[4:])
+    with pytest.raises(CheckpointError, match="not a syt checkpoint"):
+        checkpoint.read(tmp_path)
+    with pytest.raises(CheckpointError, match="cannot read"):
+        checkpoint.read(tmp_path / "elsewhere")
+    assert not list(tmp_path.glob(".*.tmp"))  # the atomic write left no temporary behind
+
+
+# --- a killed planner, resumed ---------------------------------------------------------------------
+
+START = "1.7,3.3,-90"  # paper-lab's target is 1.2 m behind the robot, on the bench to the north
+
+
+def _wait_for_actions(out: Path, actions: int, process: subprocess.Popen, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        assert process.poll() is None, "the search ended before it could be killed"
+        try:
+            if checkpoint.read(out).actions >= actions:
+                return
+        except CheckpointError:  # not written yet
+            pass
+        time.sleep(0.05)
+    raise AssertionError(f"no checkpoint with {actions} actions after {timeout_s} s")
+
+
+@pytest.mark.integration
+def test_a_search_killed_mid_way_resumes_from_its_checkpoint_and_finds_the_target(tmp_path):
+    out, picture = tmp_path / "out", tmp_path / "target.png"
+    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(picture)], check=True,
+                   capture_output=True)
+    with onboard_agent(["--backend", "sim", "--world", "paper-lab", "--start", START], tmp_path / "onboard.log") as agent:
+        with TransportConfig(connect=(agent.endpoint,), multicast_scouting=False).open() as session:
+            agent.wait_ready(session, "syt")
+            search = subprocess.Popen(
+                [sys.executable, "-m", "offboard.cli", "search", "--connect", agent.endpoint, "--no-multicast-scouting",
+                 "--target-picture", str(picture), "--target-sides", "4", "--room", "9,5,2.5", "--out", str(out)],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            try:
+                _wait_for_actions(out, 2, search, timeout_s=60)
+                search.send_signal(signal.SIGKILL)
+                search.wait()
+            finally:
+                search.kill()
+            saved = checkpoint.read(out)
+
+            observer = Observer(session)
+            deadline = time.monotonic() + 3.0
+            while observer.state().base_moving and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert not observer.state().base_moving
+            before = observer.truth()
+            time.sleep(0.5)
+            after = observer.truth()
+            assert math.hypot(after.x_m - before.x_m, after.y_m - before.y_m) < 1e-6
+            assert after.heading_deg == pytest.approx(before.heading_deg, abs=1e-6)
+
+            resumed = subprocess.run([sys.executable, "-m", "offboard.cli", "search", "--resume", str(out)],
+                                     capture_output=True, text=True, timeout=120)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["found"] and summary["actions"] > saved.actions, summary
+    assert np.linalg.norm(np.array(summary["target_estimate_m"]) - [1.7, 4.5, 0.865]) < 0.3, summary
+    looks = (out / "looks.jsonl").read_text().splitlines()
+    assert [json.loads(line)["action"] for line in looks] == list(range(1, summary["actions"] + 1))
+    assert "resumed after action" in (out / "search.log").read_text()
