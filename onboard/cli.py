@@ -6,6 +6,7 @@
     syt-onboard picture NAME --out FILE.png          a built-in picture (the target's) for the planner
     syt-onboard worlds generate --count N --seed S --out DIR     checked rooms room-S-K.toml
     syt-onboard emulate --world NAME_OR_FILE         a Pioneer and a PTU-D46 on pseudo-terminals (JSON line)
+    syt-onboard make-certs --out DIR [--host NAME]   mutual-TLS certificates and Zenoh configs (README, Security)
 """
 
 from __future__ import annotations
@@ -91,6 +92,11 @@ def run_agent(argv: list[str]) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
+    from onboard.secure_transport import warn_if_exposed
+    from onboard.zenoh_log import route_zenoh_log
+
+    route_zenoh_log()  # refused TLS peers and access-control drops: only Zenoh sees them
+    warn_if_exposed(transport.zenoh())
     session = transport.open()
     try:
         agent = Agent(config, robot.devices, session, transport.robot_id, sim=robot.sim)
@@ -225,8 +231,15 @@ def run_emulate(argv: list[str]) -> int:
     return 0
 
 
+def run_make_certs(argv: list[str]) -> int:
+    _setup_logging(False)
+    from onboard.make_certs import run
+
+    return run(argv)
+
+
 _COMMANDS = {"render": run_render, "bench": run_bench, "picture": run_picture, "worlds": run_worlds,
-             "emulate": run_emulate}
+             "emulate": run_emulate, "make-certs": run_make_certs}
 
 
 def main(argv: list[str] | None = None) -> int:

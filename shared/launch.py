@@ -51,9 +51,10 @@ class LoopbackAgent:
 
 
 @contextlib.contextmanager
-def onboard_agent(agent_args: list[str], log_path: Path | None = None) -> Iterator[LoopbackAgent]:
-    """Run ``syt-onboard <agent_args>`` listening on a fresh loopback port, scouting off."""
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+def onboard_agent(agent_args: list[str], log_path: Path | None = None,
+                  protocol: str = "tcp") -> Iterator[LoopbackAgent]:
+    """Run ``syt-onboard <agent_args>`` listening on a fresh loopback port (``tls`` with a TLS config), scouting off."""
+    endpoint = f"{protocol}/127.0.0.1:{free_tcp_port()}"
     cmd = [sys.executable, "-m", "onboard.cli", *agent_args, "--listen", endpoint, "--no-multicast-scouting"]
     log.info("starting the onboard agent: %s", " ".join(cmd[2:]))
     stderr = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115 - closed below

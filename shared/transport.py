@@ -23,6 +23,7 @@ log = logging.getLogger(__name__)
 # A frozen or unplugged peer is declared gone after this lease (Zenoh's default is 10 s): the robot
 # must notice a lost planner quickly, since its watchdog acts on the liveliness token.
 DEFAULT_LEASE_MS = 2000
+_LEASE = "transport/link/tx/lease"
 
 
 @dataclass(frozen=True)
@@ -31,9 +32,10 @@ class TransportConfig:
     connect: tuple[str, ...] = ()
     listen: tuple[str, ...] = ()
     zenoh_config: Path | None = None
-    mode: Literal["peer", "client"] = "peer"
-    multicast_scouting: bool = True
-    lease_ms: int = DEFAULT_LEASE_MS
+    # None leaves these to the file (or Zenoh's default); a flag given on the command line overrides the file
+    mode: Literal["peer", "client"] | None = None
+    multicast_scouting: bool | None = None
+    lease_ms: int | None = None  # None: the file's lease, or DEFAULT_LEASE_MS where the file sets none
     extra: dict = field(default_factory=dict)  # further "key/path": json-value overrides
 
     def __post_init__(self) -> None:
@@ -47,19 +49,18 @@ class TransportConfig:
             config = zenoh.Config.from_file(str(self.zenoh_config))
         else:
             config = zenoh.Config()
-        settings = {
-            "mode": self.mode,
-            "scouting/multicast/enabled": self.multicast_scouting,
-            "transport/link/tx/lease": self.lease_ms,
-            **self.extra,
-        }
-        if self.connect:
-            settings["connect/endpoints"] = list(self.connect)
-        if self.listen:
-            settings["listen/endpoints"] = list(self.listen)
-        for key, value in settings.items():
+        for key, value in {**self._flag_settings(config), **self.extra}.items():
             config.insert_json5(key, json.dumps(value))
         return config
+
+    def _flag_settings(self, config: zenoh.Config) -> dict:
+        """The flags that were given, plus the project's lease where the file keeps Zenoh's (10 s)."""
+        lease = self.lease_ms
+        if lease is None and config.get_json(_LEASE) == zenoh.Config().get_json(_LEASE):
+            lease = DEFAULT_LEASE_MS
+        settings = {"mode": self.mode, "scouting/multicast/enabled": self.multicast_scouting, _LEASE: lease,
+                    "connect/endpoints": list(self.connect) or None, "listen/endpoints": list(self.listen) or None}
+        return {key: value for key, value in settings.items() if value is not None}
 
     def open(self) -> zenoh.Session:
         log.info("opening Zenoh session: mode=%s connect=%s listen=%s scouting=%s",
@@ -76,11 +77,11 @@ def add_transport_args(parser: argparse.ArgumentParser) -> None:
                        help="endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
     group.add_argument("--zenoh-config", type=Path, metavar="FILE.json5",
                        help="a Zenoh configuration file (TLS, access control ...); flags override it")
-    group.add_argument("--mode", choices=("peer", "client"), default="peer", help="Zenoh mode (default: peer)")
+    group.add_argument("--mode", choices=("peer", "client"), help="Zenoh mode (default: the file's, else peer)")
     group.add_argument("--no-multicast-scouting", action="store_true",
                        help="do not discover peers by multicast (use with --connect/--listen)")
-    group.add_argument("--lease-ms", type=int, default=DEFAULT_LEASE_MS,
-                       help=f"link lease: a silent peer is dropped after this (default: {DEFAULT_LEASE_MS})")
+    group.add_argument("--lease-ms", type=int,
+                       help=f"link lease: a silent peer is dropped after this (default: the file's, else {DEFAULT_LEASE_MS})")
 
 
 def transport_from_args(args: argparse.Namespace) -> TransportConfig:
@@ -90,6 +91,6 @@ def transport_from_args(args: argparse.Namespace) -> TransportConfig:
         listen=tuple(args.listen),
         zenoh_config=args.zenoh_config,
         mode=args.mode,
-        multicast_scouting=not args.no_multicast_scouting,
+        multicast_scouting=False if args.no_multicast_scouting else None,
         lease_ms=args.lease_ms,
     )
