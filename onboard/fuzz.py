@@ -14,13 +14,14 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from types import ModuleType
 
 from shared.fuzzing import Case, FuzzTarget, MissingHypothesis, require_hypothesis
 
 DEPLOY_CONFIG = Path(__file__).resolve().parent.parent / "deploy" / "robot" / "onboard.toml"
 
 
-def _stream_target(name: str, fuzz_module, error: type[Exception]) -> FuzzTarget:
+def _stream_target(name: str, fuzz_module: ModuleType, error: type[Exception]) -> FuzzTarget:
     """A serial parser's own property as a target: ``check_stream`` raises on any failure."""
     from hypothesis import strategies as st
 

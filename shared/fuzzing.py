@@ -116,10 +116,10 @@ def judge(target: FuzzTarget, case: Case) -> tuple[str, str | None]:
     return "accepted", None
 
 
-def run_target(target: FuzzTarget, cases: int, seed: int | None = None) -> FuzzReport:
+def run_target(target: FuzzTarget, cases: int) -> FuzzReport:
     """Run at least ``cases`` generated cases through ``target``; never stops at a failure."""
     require_hypothesis()
-    from hypothesis import HealthCheck, Phase, given, seed as fix_seed, settings
+    from hypothesis import HealthCheck, Phase, given, settings
 
     report = FuzzReport(target.name)
     started = time.perf_counter()
@@ -138,7 +138,7 @@ def run_target(target: FuzzTarget, cases: int, seed: int | None = None) -> FuzzR
                 report.examples.append(f"{problem} [input: {_shown(case.data)}]")
 
     while report.cases < cases:  # a strategy with few distinct cases may stop early: go again
-        (run if seed is None else fix_seed(seed + report.cases)(run))()
+        run()
     report.seconds = round(time.perf_counter() - started, 2)
     return report
 
