@@ -1,0 +1,46 @@
+"""The Zenoh transport flags: the file first, then only the flags given on the command line."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from shared.transport import DEFAULT_LEASE_MS, TransportConfig, add_transport_args, transport_from_args
+
+FILE = """{
+  mode: "client",
+  listen: { endpoints: ["tls/0.0.0.0:7447"] },
+  connect: { endpoints: ["tls/robot.local:7447"] },
+  scouting: { multicast: { enabled: false } },
+  transport: { link: { tx: { lease: 1500 } } },
+}"""
+
+
+def _config(tmp_path, *argv: str) -> dict:
+    path = tmp_path / "zenoh.json5"
+    path.write_text(FILE)
+    parser = argparse.ArgumentParser()
+    add_transport_args(parser)
+    config = transport_from_args(parser.parse_args(["--zenoh-config", str(path), *argv])).zenoh()
+    keys = ("mode", "listen/endpoints", "connect/endpoints", "scouting/multicast/enabled", "transport/link/tx/lease")
+    return {key: json.loads(config.get_json(key)) for key in keys}
+
+
+def test_without_flags_the_file_decides(tmp_path):
+    assert _config(tmp_path) == {"mode": "client", "listen/endpoints": ["tls/0.0.0.0:7447"],
+                                 "connect/endpoints": ["tls/robot.local:7447"],
+                                 "scouting/multicast/enabled": False, "transport/link/tx/lease": 1500}
+
+
+def test_flags_given_override_the_file(tmp_path):
+    assert _config(tmp_path, "--mode", "peer", "--listen", "tls/127.0.0.1:9000", "--connect", "tcp/10.0.0.2:7447",
+                   "--lease-ms", "800") == {
+        "mode": "peer", "listen/endpoints": ["tls/127.0.0.1:9000"], "connect/endpoints": ["tcp/10.0.0.2:7447"],
+        "scouting/multicast/enabled": False, "transport/link/tx/lease": 800}
+
+
+def test_without_a_file_the_lease_is_the_projects_and_zenoh_keeps_its_defaults():
+    config = TransportConfig().zenoh()
+    assert json.loads(config.get_json("transport/link/tx/lease")) == DEFAULT_LEASE_MS
+    assert config.get_json("mode") == "null"  # Zenoh's default: peer
+    assert json.loads(TransportConfig(multicast_scouting=False).zenoh().get_json("scouting/multicast/enabled")) is False
