@@ -145,17 +145,25 @@ def encode_maps(belief: dict, log_odds: np.ndarray, observed: np.ndarray) -> tup
     header = {"belief": {k: float(belief[k]) for k in ("outside", "scale", "stored_total", "success_prob")},
               "coded": {"belief.mass": [list(mass.shape), mass.dtype], "occupancy.log_odds": [list(odds.shape), odds.dtype]},
               "grid_shape": list(observed.shape)}
-    arrays = {"belief.mass.flags": mass.flags, "belief.mass.values": mass.values, "belief.coarse": belief["coarse"],
-              "belief.seen_empty": np.packbits(belief["seen_empty"]), "occupancy.log_odds.flags": odds.flags,
-              "occupancy.log_odds.values": odds.values, "occupancy.observed": np.packbits(observed)}
+    arrays = {**_coded("belief.mass", mass), "belief.coarse": belief["coarse"],
+              "belief.seen_empty": np.packbits(belief["seen_empty"]), **_coded("occupancy.log_odds", odds),
+              "occupancy.observed": np.packbits(observed)}
     return header, arrays
+
+
+def _coded(name: str, encoded: repeat_codec.Encoded) -> dict[str, np.ndarray]:
+    arrays = {f"{name}.flags": encoded.flags, f"{name}.values": encoded.values}
+    if encoded.palette is not None:
+        arrays[f"{name}.palette"] = encoded.palette
+    return arrays
 
 
 def decode_maps(checkpoint: Checkpoint) -> tuple[dict, np.ndarray, np.ndarray]:
     """The belief state, log-odds and observed mask that :func:`encode_maps` was given."""
     h, a = checkpoint.header, checkpoint.arrays
     try:
-        mass, odds = (repeat_codec.decode(repeat_codec.Encoded(tuple(shape), dtype, a[f"{name}.flags"], a[f"{name}.values"]))
+        mass, odds = (repeat_codec.decode(repeat_codec.Encoded(tuple(shape), dtype, a[f"{name}.flags"], a[f"{name}.values"],
+                                                               a.get(f"{name}.palette")))
                       for name, (shape, dtype) in h["coded"].items())
     except ValueError as exc:
         raise CheckpointError(str(checkpoint.path), None, f"damaged map: {exc}") from None

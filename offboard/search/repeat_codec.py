@@ -13,6 +13,10 @@ Values are compared as bit patterns, so the decoding is exact to the bit (−0.0
 whatever the values are; only the size depends on how much repeats (the worst case is the raw
 size plus one bit per value). An occupancy grid codes the same way with one value a row: its
 unobserved zeros are runs of one reference.
+
+The stored values are few distinct ones (a belief's change comes from a detectability table's
+cells: a few thousand values among millions), so when there are at most 65,536 of them they are
+stored once, in a palette, and the stream holds 16-bit indices into it: half the size.
 """
 
 from __future__ import annotations
@@ -22,20 +26,23 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+PALETTE_HASH_BITS = 17  # the palette's hash table: 131,072 slots for at most 65,536 values
 
 @dataclass(frozen=True)
 class Encoded:
     """An encoded array: ``flags`` (packed bits, row by row: new reference, then one per sector) and
-    the ``values`` stream (uint32 bit patterns), plus what the decoder needs to rebuild it."""
+    the ``values`` stream (uint32 bit patterns, or uint16 indices into ``palette``), plus what the
+    decoder needs to rebuild it."""
 
     shape: tuple[int, ...]
     dtype: str
     flags: np.ndarray  # uint8
-    values: np.ndarray  # uint32
+    values: np.ndarray  # uint32, or uint16 with a palette
+    palette: np.ndarray | None = None  # uint32
 
     @property
     def nbytes(self) -> int:
-        return self.flags.nbytes + self.values.nbytes
+        return self.flags.nbytes + self.values.nbytes + (0 if self.palette is None else self.palette.nbytes)
 
 
 def encode(array: np.ndarray) -> Encoded:
@@ -47,7 +54,10 @@ def encode(array: np.ndarray) -> Encoded:
     flags = np.zeros(-(-rows.shape[0] * (width + 1) // 8), np.uint8)
     values = np.empty(rows.size + rows.shape[0], np.uint32)
     count = _encode(rows, flags, values)
-    return Encoded(tuple(array.shape), array.dtype.str, flags, values[:count].copy())
+    codes, palette, distinct = _palette(values[:count], PALETTE_HASH_BITS)
+    if distinct < 0:
+        return Encoded(tuple(array.shape), array.dtype.str, flags, values[:count].copy())
+    return Encoded(tuple(array.shape), array.dtype.str, flags, codes, palette[:distinct].copy())
 
 
 def decode(encoded: Encoded) -> np.ndarray:
@@ -57,9 +67,13 @@ def decode(encoded: Encoded) -> np.ndarray:
     n_rows = int(np.prod(shape, dtype=np.int64)) // width
     if dtype.itemsize != 4 or encoded.flags.size != -(-n_rows * (width + 1) // 8):
         raise ValueError(f"encoded array of shape {shape} and dtype {dtype}: flags of the wrong size")
+    values = encoded.values
+    if encoded.palette is not None:
+        if values.dtype != np.uint16 or (values.size and int(values.max()) >= encoded.palette.size):
+            raise ValueError(f"encoded array of shape {shape}: indices beyond its palette of {encoded.palette.size}")
+        values = encoded.palette[values]
     rows = np.empty((n_rows, width), np.uint32)
-    used = _decode(np.ascontiguousarray(encoded.flags, np.uint8), np.ascontiguousarray(encoded.values, np.uint32),
-                   rows)
+    used = _decode(np.ascontiguousarray(encoded.flags, np.uint8), np.ascontiguousarray(values, np.uint32), rows)
     if used != encoded.values.size:
         raise ValueError(f"encoded array of shape {shape}: {encoded.values.size} values stored, {used} used")
     return rows.view(dtype).reshape(shape)
@@ -113,6 +127,35 @@ def _decode(flags, values, rows):
                 rows[r, s] = ref
             bit += 1
     return count
+
+
+@numba.njit(cache=True)
+def _palette(values, bits):
+    """uint16 indices of ``values`` into their distinct values (in order of first appearance), by
+    an open-addressing hash table; the count is -1 if there are more than 65,536."""
+    mask = np.uint64((1 << bits) - 1)
+    keys = np.empty(1 << bits, np.uint32)
+    slots = np.full(1 << bits, -1, np.int32)
+    codes = np.empty(values.size, np.uint16)
+    palette = np.empty(65536, np.uint32)
+    n = 0
+    last_value, last_code = np.uint32(0), -1
+    for i in range(values.size):
+        v = values[i]
+        if last_code >= 0 and v == last_value:  # runs are common: skip the table
+            codes[i] = last_code
+            continue
+        h = ((np.uint64(v) * np.uint64(2654435761)) >> np.uint64(32 - bits)) & mask  # Knuth's multiplicative hash
+        while slots[h] != -1 and keys[h] != v:
+            h = (h + np.uint64(1)) & mask
+        if slots[h] == -1:
+            if n == 65536:
+                return codes, palette, -1
+            keys[h], slots[h], palette[n] = v, n, v
+            n += 1
+        codes[i] = slots[h]
+        last_value, last_code = v, slots[h]
+    return codes, palette, n
 
 
 @numba.njit(cache=True, inline="always")

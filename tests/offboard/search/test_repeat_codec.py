@@ -1,5 +1,7 @@
 """The repeat codec: exact to the bit for any 4-byte array, small when values repeat."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -32,12 +34,25 @@ def test_repeated_values_cost_about_a_bit_each():
     assert np.array_equal(repeat_codec.decode(encoded), mass)
 
 
+def test_few_distinct_values_go_through_a_palette_and_many_do_not():
+    few = np.random.default_rng(0).choice(np.float32([0.1, 0.2, 0.3]), (5_000, 8))
+    many = np.random.default_rng(1).uniform(size=(20_000, 8)).astype(np.float32)  # ~160,000 distinct
+    coded_few, coded_many = repeat_codec.encode(few), repeat_codec.encode(many)
+    assert coded_few.palette is not None and coded_few.values.dtype == np.uint16
+    assert coded_many.palette is None and coded_many.values.dtype == np.uint32
+    assert np.array_equal(repeat_codec.decode(coded_few), few) and np.array_equal(repeat_codec.decode(coded_many), many)
+
+
 def test_damaged_codes_and_unsupported_arrays_are_refused():
     encoded = repeat_codec.encode(np.arange(100, dtype=np.float32))
+    assert encoded.palette is not None
     with pytest.raises(ValueError, match="too few values"):
-        repeat_codec.decode(repeat_codec.Encoded(encoded.shape, encoded.dtype, encoded.flags, encoded.values[:-1]))
-    with pytest.raises(ValueError, match="stored"):
-        repeat_codec.decode(repeat_codec.Encoded(encoded.shape, encoded.dtype, encoded.flags,
-                                                 np.append(encoded.values, np.uint32(7))))
+        repeat_codec.decode(dataclasses.replace(encoded, values=encoded.values[:-1]))
+    with pytest.raises(ValueError, match="101 values stored, 100 used"):
+        repeat_codec.decode(dataclasses.replace(encoded, values=np.append(encoded.values, np.uint16(7))))
+    with pytest.raises(ValueError, match="beyond its palette"):
+        repeat_codec.decode(dataclasses.replace(encoded, palette=encoded.palette[:50]))
+    with pytest.raises(ValueError, match="flags of the wrong size"):
+        repeat_codec.decode(dataclasses.replace(encoded, flags=encoded.flags[:-1]))
     with pytest.raises(ValueError, match="4-byte"):
         repeat_codec.encode(np.zeros(4, np.float64))
