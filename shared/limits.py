@@ -7,8 +7,9 @@ loads them from its config, refuses commands outside them, and reports them in i
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from shared.strict import bounds
 
@@ -34,14 +35,13 @@ class BaseLimits:
         if self.default_turn_rate_deg_s > self.max_turn_rate_deg_s:
             raise ValueError("default_turn_rate_deg_s must not exceed max_turn_rate_deg_s")
 
-    def drive_time_s(self, distance_m: float, speed_m_s: float | None = None) -> float:
-        """Time of a straight drive with a trapezoidal speed profile."""
-        return trapezoid_time_s(abs(distance_m), speed_m_s or self.default_speed_m_s, self.accel_m_s2)
+    def drive_time_s(self, distance_m, speed_m_s: float | None = None):
+        """Time of a straight drive with a trapezoidal speed profile (a number or an array)."""
+        return trapezoid_time_s(np.abs(distance_m), speed_m_s or self.default_speed_m_s, self.accel_m_s2)
 
-    def turn_time_s(self, turn_rad: float) -> float:
-        """Time of an in-place rotation at the default turn rate."""
-        return trapezoid_time_s(abs(math.degrees(turn_rad)), self.default_turn_rate_deg_s,
-                                self.turn_accel_deg_s2)
+    def turn_time_s(self, turn_rad):
+        """Time of an in-place rotation at the default turn rate (a number or an array)."""
+        return trapezoid_time_s(np.abs(np.degrees(turn_rad)), self.default_turn_rate_deg_s, self.turn_accel_deg_s2)
 
 
 @dataclass(frozen=True)
@@ -66,12 +66,13 @@ class PanTiltLimits:
                     f"[{self.tilt_min_deg:g}, {self.tilt_max_deg:g}]°")
         return None
 
-    def slew_time_s(self, d_pan_deg: float, d_tilt_deg: float) -> float:
-        """Both axes move at once; the slower one sets the time, plus settling."""
-        if d_pan_deg == 0.0 and d_tilt_deg == 0.0:
-            return 0.0
-        return max(trapezoid_time_s(abs(d_pan_deg), self.pan_speed_deg_s, self.accel_deg_s2),
-                   trapezoid_time_s(abs(d_tilt_deg), self.tilt_speed_deg_s, self.accel_deg_s2)) + self.settle_s
+    def slew_time_s(self, d_pan_deg, d_tilt_deg):
+        """Both axes move at once; the slower one sets the time, plus settling (numbers or arrays)."""
+        pan, tilt = np.abs(np.asarray(d_pan_deg, np.float64)), np.abs(np.asarray(d_tilt_deg, np.float64))
+        t = np.maximum(trapezoid_time_s(pan, self.pan_speed_deg_s, self.accel_deg_s2),
+                       trapezoid_time_s(tilt, self.tilt_speed_deg_s, self.accel_deg_s2)) + self.settle_s
+        t = np.where((pan == 0.0) & (tilt == 0.0), 0.0, t)
+        return float(t) if t.ndim == 0 else t
 
 
 @dataclass(frozen=True)
@@ -81,11 +82,11 @@ class CameraTiming:
     capture_s: float = field(default=0.1, metadata=bounds(0.0, 10.0))
 
 
-def trapezoid_time_s(distance: float, top_speed: float, accel: float) -> float:
-    """Time to cover ``distance`` from rest to rest with limited speed and acceleration."""
-    if distance <= 0.0:
-        return 0.0
+def trapezoid_time_s(distance, top_speed: float, accel: float):
+    """Time to cover ``distance`` (a number or an array) from rest to rest with limited speed and
+    acceleration."""
+    d = np.maximum(np.asarray(distance, np.float64), 0.0)
     ramp = top_speed * top_speed / accel  # distance spent accelerating plus decelerating
-    if distance < ramp:
-        return 2.0 * math.sqrt(distance / accel)
-    return distance / top_speed + top_speed / accel
+    t = np.where(d < ramp, 2.0 * np.sqrt(d / accel), d / top_speed + top_speed / accel)
+    t = np.where(d > 0.0, t, 0.0)
+    return float(t) if t.ndim == 0 else t

@@ -216,17 +216,15 @@ class SearchPlanner:
 
     def _candidate_times(self, pose: Pose2D, path_lengths_m: np.ndarray) -> np.ndarray:
         """t(f) of every (candidate, setting): travel along the path, then a look (heading on
-        arrival taken as the direction of travel)."""
-        times = np.full((len(self.positions), len(self.settings)), np.inf)
-        for j, (x, y) in enumerate(self.positions):
-            if not math.isfinite(path_lengths_m[j]):
-                continue
-            turn = pose.bearing_to(x, y) if pose.distance_to(x, y) > 1e-6 else 0.0
-            travel = self.time_model.travel_s(path_lengths_m[j], turn)
-            arrival = math.atan2(y - pose.y_m, x - pose.x_m)
-            times[j] = travel + self.time_model.look_times_s(arrival, 0.0, 0.0, self.settings.azimuth_rad,
-                                                             self.settings.tilt_rad)
-        return times
+        arrival taken as the direction of travel); inf where the candidate is unreachable."""
+        dx, dy = self.positions[:, 0] - pose.x_m, self.positions[:, 1] - pose.y_m
+        arrival = np.arctan2(dy, dx)
+        turn = np.where(np.hypot(dx, dy) > 1e-6, np.angle(np.exp(1j * (arrival - pose.heading_rad))), 0.0)
+        lengths = np.asarray(path_lengths_m, float)
+        travel = self.time_model.base.turn_time_s(turn) + self.time_model.base.drive_time_s(np.where(np.isfinite(lengths), lengths, 0.0))
+        looks = self.time_model.look_times_s(arrival[:, None], 0.0, 0.0, self.settings.azimuth_rad[None],
+                                             self.settings.tilt_rad[None])
+        return np.where(np.isfinite(lengths)[:, None], travel[:, None] + looks, np.inf)
 
     def _look_here(self, values: ActionValues, look_t: np.ndarray, covering: float, why: str) -> Decision:
         """Eq. 3: the look of largest E(f) = P_Ψ(f) / t(f) from where the robot stands."""

@@ -47,10 +47,15 @@ class TimeModel:
         slew = self.pantilt.slew_time_s(math.degrees(pan - pan_rad), math.degrees(target_tilt_rad - tilt_rad))
         return LookPlan(turn, pan, target_tilt_rad, self.base.turn_time_s(turn) + slew + self.image_s)
 
-    def look_times_s(self, heading_rad: float, pan_rad: float, tilt_rad: float, azimuths_rad: np.ndarray,
+    def look_times_s(self, heading_rad, pan_rad: float, tilt_rad: float, azimuths_rad: np.ndarray,
                      tilts_rad: np.ndarray) -> np.ndarray:
-        return np.array([self.look(heading_rad, pan_rad, tilt_rad, a, t).time_s
-                         for a, t in zip(azimuths_rad, tilts_rad)])
+        """:meth:`look`'s time for every setting at once; ``heading_rad`` may be an array that
+        broadcasts against the settings (one heading per candidate position, say)."""
+        wanted = np.angle(np.exp(1j * (np.asarray(azimuths_rad) - np.asarray(heading_rad))))  # wrapped
+        pan = np.clip(wanted, math.radians(self.pantilt.pan_min_deg), math.radians(self.pantilt.pan_max_deg))
+        turn = np.angle(np.exp(1j * (wanted - pan)))
+        slew = self.pantilt.slew_time_s(np.degrees(pan - pan_rad), np.degrees(np.asarray(tilts_rad) - tilt_rad))
+        return self.base.turn_time_s(turn) + slew + self.image_s
 
     def travel_s(self, path_length_m: float, turn_rad: float) -> float:
         """Drive a path of this length after turning towards it."""

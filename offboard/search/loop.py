@@ -65,6 +65,8 @@ class SearchConfig:
     empty_factor: float = field(default=0.05, metadata=bounds(0.0, 1.0))  # what such a cube keeps (stereo errs)
     behind_surface_m: float = field(default=0.12, metadata=bounds(0.0, 1.0))  # target centre behind its face
     max_actions: int = field(default=150, metadata=bounds(1, 10_000))
+    planning_block_m: float = field(default=0.2, metadata=bounds(0.05, 2.0))  # the planner reads the belief in blocks
+    max_planning_blocks: int = field(default=16_000, metadata=bounds(100, 10_000_000))  # larger rooms: larger blocks
     planner: PlannerConfig = PlannerConfig()
     occupancy: OccupancyConfig = OccupancyConfig()
     stereo: StereoConfig = StereoConfig()
@@ -114,7 +116,7 @@ class Search:
         grid = VoxelGrid(config.room_m, config.resolution_m)
         self.occupancy = OccupancyGrid(grid, config.occupancy)
         self.belief = TargetBelief(grid, config.facing_sectors, config.prob_outside,
-                                   coarse_factor=max(1, round(0.2 / config.resolution_m)))
+                                   coarse_factor=planning_block_factor(config))
         self.belief.set_prior(prior, config.prob_outside)
         self.time_model = TimeModel(info.base, info.pantilt, info.camera)
         self.planner = SearchPlanner(self.belief, config.planner, self._planning_table(), self.time_model,
@@ -391,6 +393,15 @@ class Search:
         title = (f"{s.status}: {s.actions} looks, {len(s.positions)} positions, {s.distance_m:.1f} m, "
                  f"{self.robot_time_s() / 60:.1f} min robot time")
         draw_top_view(path, self.config.room_m, floor, s.trail, s.looks, self.intrinsics.hfov_rad, s.estimate_m, title)
+
+
+def planning_block_factor(config: SearchConfig) -> int:
+    """Cubes per edge of the blocks the planner reads (:meth:`TargetBelief.coarse_mass`): about
+    ``planning_block_m``, larger in a room that would otherwise have more than
+    ``max_planning_blocks`` of them (a decision's cost grows with the blocks it scores)."""
+    volume = math.prod(config.room_m)
+    edge_m = max(config.planning_block_m, (volume / config.max_planning_blocks) ** (1 / 3))
+    return max(1, math.ceil(edge_m / config.resolution_m - 1e-9))
 
 
 def build_prior(grid: VoxelGrid, specs: list[str]) -> np.ndarray:
