@@ -30,7 +30,6 @@ calls it. Candidate positions are the report's grid vertices plus viewpoints aim
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
