@@ -9,6 +9,7 @@ map, write the file with the plain state, fsync, rename, fsync the folder.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import tempfile
@@ -63,7 +64,7 @@ def _plain_search(looks: int) -> dict:
     log_entry = {"action": 1, "expected_p": 0.111406, "realised_p": 0.112968, "detected": False,
                  "processing_s": 1.0667, "motion_s": 0.5651, "x_m": 1.7, "y_m": 3.3, "setting": 2}
     return {"state": {"actions": looks, "look_log": [log_entry] * looks, "planning_ms": [400.0] * looks,
-                      "trail": [[1.0, 2.0]] * looks}, "config": checkpoint._plain(SearchConfig())}
+                      "trail": [[1.0, 2.0]] * looks}, "config": dataclasses.asdict(SearchConfig())}
 
 
 def run(writes: int = 15) -> dict:

@@ -47,6 +47,7 @@ FILE_NAME = "checkpoint.syt"
 MAGIC = b"SYTCKPT\x00"
 VERSION = 1
 ALIGN = 64
+HEADER_KEYS = ("request", "transport", "config", "wall_time_s", "search", "belief", "coded", "grid_shape", "arrays")
 
 
 class CheckpointError(StructureError):
@@ -95,6 +96,8 @@ class Checkpointer:
     def __init__(self, out_dir: Path, request: SearchRequest, transport: TransportConfig,
                  wall_before_s: float = 0.0):
         self.path = out_dir / FILE_NAME
+        for stale in out_dir.glob(f".{FILE_NAME}.*.tmp"):  # a write cut short by a crash
+            stale.unlink()
         self._fixed = {"request": request_plain(request), "transport": transport_plain(transport)}
         self._started = time.monotonic()
         self._wall_before_s = wall_before_s
@@ -302,8 +305,12 @@ def read(folder: Path) -> Checkpoint:
         header = json.loads(data[len(MAGIC) + 8:len(MAGIC) + 8 + length])
     except ValueError as exc:
         raise CheckpointError(str(path), None, f"damaged header: {exc}") from None
-    if header.get("version") != VERSION:
-        raise CheckpointError(f"{path}: version", header.get("version"), f"this syt reads version {VERSION}")
+    if not isinstance(header, dict) or header.get("version") != VERSION:
+        raise CheckpointError(f"{path}: version", header.get("version") if isinstance(header, dict) else header,
+                              f"this syt reads version {VERSION}")
+    missing = [key for key in HEADER_KEYS if key not in header]
+    if missing:
+        raise CheckpointError(f"{path}: {missing[0]}", None, "missing from the checkpoint's header")
     start = _aligned(len(MAGIC) + 8 + length)
     arrays = {}
     for name, entry in header.pop("arrays").items():

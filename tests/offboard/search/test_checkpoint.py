@@ -47,6 +47,7 @@ def _looked_at(seed: int) -> tuple[TargetBelief, OccupancyGrid]:
 
 def _saved_and_read(tmp_path: Path, belief: TargetBelief, occupancy: OccupancyGrid) -> checkpoint.Checkpoint:
     header, arrays = checkpoint.encode_maps(belief.state(), occupancy.log_odds, occupancy.observed)
+    header.update(request={}, transport={}, config={}, wall_time_s=0.0, search={})  # the maps are under test
     checkpoint.write_file(tmp_path / checkpoint.FILE_NAME, header, arrays)
     return checkpoint.read(tmp_path)
 
@@ -123,6 +124,10 @@ def test_damaged_checkpoints_are_refused_naming_the_problem(tmp_path):
         checkpoint.read(tmp_path)
     with pytest.raises(CheckpointError, match="cannot read"):
         checkpoint.read(tmp_path / "elsewhere")
+    header = {"version": checkpoint.VERSION, "request": {}}
+    checkpoint.write_file(path, header, {})
+    with pytest.raises(CheckpointError, match="transport: missing"):
+        checkpoint.read(tmp_path)
     assert not list(tmp_path.glob(".*.tmp"))  # the atomic write left no temporary behind
 
 
