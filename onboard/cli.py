@@ -6,6 +6,8 @@
     syt-onboard picture NAME --out FILE.png          a built-in picture (the target's) for the planner
     syt-onboard worlds generate --count N --seed S --out DIR     checked rooms room-S-K.toml
     syt-onboard emulate --world NAME_OR_FILE         a Pioneer and a PTU-D46 on pseudo-terminals (JSON line)
+    syt-onboard calibrate-stereo --images DIR --board COLSxROWS --square-mm S --out stereo.yaml
+    syt-onboard probe [--port PORT] [--json]          serial ports and cameras, and what answers on them
     syt-onboard make-certs --out DIR [--host NAME]   mutual-TLS certificates and Zenoh configs (README, Security)
 """
 
@@ -238,8 +240,61 @@ def run_make_certs(argv: list[str]) -> int:
     return run(argv)
 
 
+def run_calibrate_stereo(argv: list[str]) -> int:
+    """Calibrate a stereo camera from chessboard pictures; print the RMS and what was used."""
+    parser = argparse.ArgumentParser(prog="syt-onboard calibrate-stereo",
+                                     description="Calibrate a stereo camera from chessboard pictures.")
+    parser.add_argument("--images", type=Path, required=True, metavar="DIR",
+                        help="left_*.png + right_*.png pairs, or side-by-side frames")
+    parser.add_argument("--board", required=True, metavar="COLSxROWS", help="inner corners, e.g. 9x6")
+    parser.add_argument("--square-mm", type=float, required=True, metavar="S", help="a square's side")
+    parser.add_argument("--out", type=Path, required=True, metavar="FILE.yaml")
+    parser.add_argument("--max-rms-px", type=float, default=1.0, help="refuse a calibration worse than this")
+    args = parser.parse_args(argv)
+    _setup_logging(False)
+    from onboard.hardware.stereo_calibration import CalibrationError, calibrate_stereo
+
+    try:
+        summary = calibrate_stereo(args.images, args.board, args.square_mm, args.out, max_rms_px=args.max_rms_px)
+    except CalibrationError as exc:
+        log.error("calibrate-stereo: %s", exc)
+        return 2
+    sys.stdout.write(json.dumps(summary) + "\n")
+    return 0
+
+
+def run_probe(argv: list[str]) -> int:
+    """List serial ports and cameras and what answers on them, or identify one port."""
+    parser = argparse.ArgumentParser(prog="syt-onboard probe", description="Find the robot's devices.")
+    parser.add_argument("--port", metavar="PORT", help="identify only this serial port (a path or a URL)")
+    parser.add_argument("--baud", type=int, default=9600)
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    args = parser.parse_args(argv)
+    _setup_logging(False)
+    from onboard.probe import describe, identify_port, probe_all
+
+    if args.port:
+        answer = identify_port(args.port, args.baud)
+        sys.stdout.write((json.dumps(answer) if args.json else describe(answer)) + "\n")
+        return 0 if answer["device"] != "unknown" else 1
+    found = probe_all()
+    if args.json:
+        sys.stdout.write(json.dumps(found) + "\n")
+        return 0
+    for entry in found["serial"]:
+        usb = entry["usb"]
+        ids = f" (USB {usb['vendor']}:{usb['product']} serial {usb['serial']})" if usb else ""
+        sys.stdout.write(f"{describe(entry['answer'])}{ids}\n")
+    for camera in found["cameras"]:
+        sys.stdout.write(describe(camera) + "\n")
+    if not found["serial"] and not found["cameras"]:
+        sys.stdout.write("no serial ports and no cameras found\n")
+    return 0
+
+
 _COMMANDS = {"render": run_render, "bench": run_bench, "picture": run_picture, "worlds": run_worlds,
-             "emulate": run_emulate, "make-certs": run_make_certs}
+             "emulate": run_emulate, "calibrate-stereo": run_calibrate_stereo, "probe": run_probe,
+             "make-certs": run_make_certs}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import shutil
+import subprocess
+import sys
 
 import cv2
 import numpy as np
@@ -123,3 +126,17 @@ def test_sizes_partners_rms_and_board_text(views, tmp_path):
     assert parse_board("9x6") == (9, 6)
     with pytest.raises(CalibrationError, match=r"--board '9-6': expected COLSxROWS"):
         parse_board("9-6")
+
+
+def test_the_command_prints_the_rms_and_a_bad_set_exits_2_saying_why(views, tmp_path):
+    out = tmp_path / "stereo.yaml"
+    command = [sys.executable, "-m", "onboard.cli", "calibrate-stereo", "--images", str(views), "--square-mm",
+               str(SQUARE_MM), "--out", str(out), "--board"]
+    done = subprocess.run(command + ["9x6"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert summary["rms_px"] < 0.5 and summary["out"] == str(out) and load_rig(out).baseline_m > 0
+    out.unlink()
+    refused = subprocess.run(command + ["8x6"], capture_output=True, text=True, timeout=120)
+    assert refused.returncode == 2 and refused.stdout == "" and not out.exists()
+    assert "found in both images of only 0 of 10 pairs" in refused.stderr
