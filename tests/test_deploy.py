@@ -1,8 +1,10 @@
 """What deploy/ ships must load as it is."""
 
 import json
+import threading
 from pathlib import Path
 
+import pytest
 import zenoh
 
 from onboard.config import OnboardConfig
@@ -16,6 +18,48 @@ DEPLOY = Path(__file__).resolve().parent.parent / "deploy"
 def test_the_robot_config_loads_and_paces_the_simulator():
     config = load_config(OnboardConfig, DEPLOY / "robot" / "onboard.toml")
     assert config.sim.realtime and config.pantilt.pan_max_deg == 159.0
+
+
+def test_the_robot_config_names_a_pioneer_a_ptu_and_a_uvc_stereo_camera():
+    config = load_config(OnboardConfig, DEPLOY / "robot" / "onboard.toml")
+    hw = config.hardware
+    assert config.backend == "hardware" and (hw.base.port, hw.pantilt.port) == ("/dev/pioneer", "/dev/ptu")
+    assert hw.camera.device == "/dev/video0" and hw.camera.calibration == "/etc/syt/stereo.yaml"
+
+
+def test_udev_names_what_the_config_opens_and_the_service_waits_for():
+    config = load_config(OnboardConfig, DEPLOY / "robot" / "onboard.toml")
+    rules = [line for line in (DEPLOY / "robot" / "99-syt.rules").read_text().splitlines()
+             if line.strip() and not line.startswith("#")]
+    unit = (DEPLOY / "robot" / "syt-onboard.service").read_text()
+    for port in (config.hardware.base.port, config.hardware.pantilt.port):
+        name = port.removeprefix("/dev/")
+        [rule] = [r for r in rules if f'SYMLINK+="{name}"' in r]
+        assert 'SUBSYSTEM=="tty"' in rule and "ATTRS{idVendor}" in rule and 'TAG+="systemd"' in rule
+        assert f"dev-{name}.device" in unit.split("After=")[1].splitlines()[0]
+    assert "SupplementaryGroups=dialout video" in unit
+
+
+@pytest.mark.integration
+def test_the_robot_config_drives_the_emulated_robot():
+    """The shipped config as it is, with only the device names changed to the emulators'."""
+    from onboard.backends import build_robot
+    from onboard.emulators.robot import EmulatedRobot
+    from onboard.sim.world import load_world
+
+    world = load_world("paper-lab")
+    with EmulatedRobot(OnboardConfig(), world, "paper-lab") as emulated:
+        ports = emulated.ports()
+        config = load_config(OnboardConfig, DEPLOY / "robot" / "onboard.toml", {
+            "hardware.base.port": ports["base"], "hardware.pantilt.port": ports["pantilt"],
+            "hardware.camera.device": "sim", "hardware.truth": ports["truth"]})
+        devices = build_robot(config, world).devices
+        try:
+            assert devices.backend == "hardware" and devices.base.reading().pose == world.start
+            assert devices.pantilt.look(0.2, -0.1, threading.Event()) > 0.0
+            assert devices.camera.capture().left.shape == (480, 640, 3)
+        finally:
+            devices.close()
 
 
 ZENOH_CONFIGS = {"robot/zenoh.json5": "zenoh-robot.json5", "workstation/zenoh.json5": "zenoh-planner.json5",
