@@ -235,11 +235,19 @@ class MethodStats:
 
 def scope(rows: list[dict]) -> str:
     """Which worlds and seeds ``rows`` come from, and how many scenarios (start × target) per world."""
-    worlds = dict.fromkeys(r["world"] for r in rows)
     seeds = sorted({r["seed"] for r in rows if r["seed"] is not None})
     scenarios = len({(r["world"], r["start"], r["target"]) for r in rows})
-    return (f"{', '.join(worlds) or 'no world'}; seeds {','.join(f'{s:g}' for s in seeds) or '—'}; "
-            f"{scenarios} start × target scenarios")
+    return (f"{_worlds_text(dict.fromkeys(r['world'] for r in rows)) or 'no world'}; "
+            f"seeds {','.join(f'{s:g}' for s in seeds) or '—'}; {scenarios} start × target scenarios")
+
+
+def _worlds_text(worlds: dict) -> str:
+    """World names, a suite's worlds (``test/room-2000-3``) counted under the suite's name when several."""
+    groups: dict[str, list[str]] = {}
+    for name in worlds:
+        groups.setdefault(name.split("/")[0] if "/" in name else name, []).append(name)
+    return ", ".join(f"the {key} suite ({len(names)} worlds)" if len(names) > 1 else names[0]
+                     for key, names in groups.items())
 
 
 def _stats(name: str, rows: list[dict]) -> MethodStats:

@@ -10,7 +10,7 @@ import pytest
 
 from offboard.experiments.calibration import LOOKS_FILE, Look, calibration, parse_look, read_looks
 from offboard.experiments.harness import Run, make_row
-from offboard.experiments.report import COLUMNS, append_row, load_results, write_report
+from offboard.experiments.report import COLUMNS, append_row, load_results, scope, write_report
 from offboard.experiments.world_facts import load_facts
 
 SUMMARY = {"found": True, "status": "found", "actions": 6, "positions_visited": 2, "distance_m": 3.0,
@@ -135,3 +135,9 @@ def test_a_malformed_look_is_refused_naming_the_line_and_field(tmp_path, text, n
         read_looks(path)
     assert parse_look(json.dumps(_look(0.1, 0.05, True))).detected is True
     assert read_looks(tmp_path / "absent.jsonl") == []
+
+
+def test_a_suites_worlds_are_named_by_the_suite():
+    rows = [{"world": w, "seed": s, "start": "0,0,0", "target": t} for w, s, t in
+            (("test/room-1", 0.0, "a"), ("test/room-2", 1.0, "a"), ("office", 0.0, "b"), ("office", 0.0, "c"))]
+    assert scope(rows) == "the test suite (2 worlds), office; seeds 0,1; 4 start × target scenarios"
