@@ -1,0 +1,65 @@
+"""The truth link between ``syt-onboard emulate`` and a simulated camera: what it answers, and the
+errors that name what went wrong."""
+
+from __future__ import annotations
+
+import socket
+import threading
+
+import pytest
+
+from onboard.emulators.truth import (Truth, TruthLink, TruthLinkError, TruthServer, WorldPlacement, decode,
+                                     truth_from_dict)
+from onboard.sim.world import load_world
+from shared.geometry import Pose2D
+
+
+def test_the_link_answers_the_world_and_the_current_truth(tmp_path):
+    world = load_world("paper-lab").with_start(2.0, 2.0, 0.5)
+    placement = WorldPlacement.of(world, "paper-lab")
+    truths = iter([Truth(Pose2D(2.0, 2.0, 0.5), 0.1, -0.2, True), Truth(Pose2D(2.5, 2.0, 0.5), 0.0, 0.0, False)])
+    server = TruthServer(tmp_path / "truth.sock", placement, lambda: next(truths)).start()
+    try:
+        link = TruthLink(server.path)
+        assert link.placement() == placement
+        assert link.placement().load(0.26) == world
+        head = link.reading()
+        assert (head.pan_rad, head.tilt_rad, head.moving) == (0.1, -0.2, True)
+        assert link.true_pose == Pose2D(2.5, 2.0, 0.5)
+    finally:
+        server.close()
+    assert not (tmp_path / "truth.sock").exists()
+
+
+def test_no_emulator_is_a_clear_device_fault(tmp_path):
+    with pytest.raises(TruthLinkError, match=r"truth\.sock: .* \(is syt-onboard emulate running\?\)"):
+        TruthLink(str(tmp_path / "truth.sock")).truth()
+
+
+def test_a_garbled_answer_names_what_is_wrong(tmp_path):
+    path = str(tmp_path / "liar.sock")
+    listener = socket.socket(socket.AF_UNIX)
+    listener.bind(path)
+    listener.listen()
+
+    def lie() -> None:
+        for answer in (b"not json\n", b'{"x_m": 1}\n', b'{"error": "unknown ask"}\n'):
+            client, _ = listener.accept()
+            client.recv(100)
+            client.sendall(answer)
+            client.close()
+    liar = threading.Thread(target=lie)
+    liar.start()
+    link = TruthLink(path)
+    for expected in ("not a JSON line", "lacks or garbles 'y_m'", "unknown ask"):
+        with pytest.raises(TruthLinkError, match=expected):
+            link.truth()
+    liar.join()
+    listener.close()
+
+
+def test_decoding_refuses_what_is_not_a_truth():
+    with pytest.raises(TruthLinkError, match="expected a JSON object"):
+        decode(b"[1, 2]\n")
+    with pytest.raises(TruthLinkError, match="non-finite"):
+        truth_from_dict({"x_m": "nan", "y_m": 0, "heading_rad": 0, "pan_rad": 0, "tilt_rad": 0, "head_moving": False})
