@@ -56,6 +56,7 @@ from typing import Any
 
 import numpy as np
 
+from shared import toml_writer
 from shared.geometry import Pose2D
 
 WORLDS_DIR = Path(__file__).parent / "worlds"
@@ -393,40 +394,8 @@ def _texture(value: Any, key: str) -> str | None:
 
 
 def world_toml(data: dict[str, Any], comment: str = "") -> str:
-    """World data (what ``parse_world`` reads: scalars, tables, arrays of tables) as TOML text."""
-    lines = [f"# {line}".rstrip() for line in comment.splitlines()]
-    lines += _toml_pairs({k: v for k, v in data.items() if not isinstance(v, dict) and not _is_tables(v)})
-    for key, value in data.items():
-        if isinstance(value, dict):
-            lines += ["", f"[{key}]", *_toml_pairs(value)]
-        elif _is_tables(value):
-            for table in value:
-                lines += ["", f"[[{key}]]", *_toml_pairs(table)]
-    return "\n".join(lines) + "\n"
-
-
-def _is_tables(value: Any) -> bool:
-    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
-
-
-def _toml_pairs(table: dict[str, Any]) -> list[str]:
-    return [f"{key} = {_toml_value(value)}" for key, value in table.items()]
-
-
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(int(value))
-    if isinstance(value, float):  # numpy floats too: written as plain Python floats
-        if not math.isfinite(value):
-            raise WorldError(f"cannot write the non-finite number {value!r} to a world file")
-        return repr(float(value))
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise WorldError(f"cannot write {type(value).__name__} {value!r} to a world file")
+    """World data (what ``parse_world`` reads) as TOML text, under ``comment`` as ``#`` lines."""
+    return "".join(f"# {line}".rstrip() + "\n" for line in comment.splitlines()) + toml_writer.dumps(data)
 
 
 # ----------------------------------------------------------------------------- validation
