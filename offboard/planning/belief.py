@@ -97,6 +97,25 @@ class TargetBelief:
         self._stored_total = float(self._mass.sum(dtype=np.float64)) + self._outside
         self._rebuild_coarse()
 
+    def exclude_facings_into_walls(self, clearance_m: float) -> None:
+        """No picture faces a wall it almost touches: a facing whose face point (``clearance_m`` out
+        from a cube's centre, along the facing) lies outside the room's known boundary gets no mass;
+        the rest of each cube's share keeps the prior's total inside the room."""
+        if self.facing_sectors == 1:
+            return  # the target faces the camera, whichever way it looks
+        inside_before = self._mass.sum(dtype=np.float64)
+        centers = self.grid.centers()[..., :2]
+        size = np.asarray(self.grid.size_m[:2])
+        for s, azimuth in enumerate(self.facing_azimuths_rad):
+            face = centers + clearance_m * np.array([math.cos(azimuth), math.sin(azimuth)])
+            outside = np.any((face < 0.0) | (face > size), axis=-1)
+            self._mass[outside, s] = 0.0
+        inside_after = self._mass.sum(dtype=np.float64)
+        if inside_after > 0:
+            self._mass *= np.float32(inside_before / inside_after)
+        self._stored_total = float(self._mass.sum(dtype=np.float64)) + self._outside
+        self._rebuild_coarse()
+
     def reweight(self, factors: np.ndarray) -> None:
         """Multiply every cube's mass by a grid-shaped factor and renormalise (priors that arrive
         during the search: support surfaces, saliency)."""

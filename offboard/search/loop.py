@@ -118,6 +118,7 @@ class Search:
         self.belief = TargetBelief(grid, config.facing_sectors, config.prob_outside,
                                    coarse_factor=planning_block_factor(config))
         self.belief.set_prior(prior, config.prob_outside)
+        self.belief.exclude_facings_into_walls(target_depth_m / 2 + config.resolution_m)
         self.time_model = TimeModel(info.base, info.pantilt, info.camera)
         self.planner = SearchPlanner(self.belief, config.planner, self._planning_table(), self.time_model,
                                      self.intrinsics, self.mount)

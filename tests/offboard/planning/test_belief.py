@@ -149,3 +149,13 @@ def test_space_seen_empty_loses_its_mass_once_whatever_the_facing():
     assert belief.target_prob[:10].sum() == pytest.approx(0.025 / 0.525, rel=1e-5)
     again = belief.rule_out_empty(empty, 0.05)  # the map still says empty: nothing new is learnt
     assert again == 0.0 and belief.target_prob[:10].sum() == pytest.approx(0.025 / 0.525, rel=1e-5)
+
+
+def test_no_picture_faces_a_wall_it_almost_touches():
+    belief = TargetBelief(GRID, facing_sectors=4, prob_outside=0.1)  # facings +x, +y, -x, -y
+    belief.exclude_facings_into_walls(0.15)
+    mass = belief.mass_by_facing()
+    assert mass[-1, :, :, 0].sum() == 0 and mass[-1, :, :, 2].sum() > 0  # the east wall: nothing faces it
+    assert mass[0, :, :, 2].sum() == 0 and mass[0, :, :, 0].sum() > 0  # the west wall likewise
+    assert mass[10, 5, 2].min() > 0  # the middle of the room faces anywhere
+    assert mass.sum() == pytest.approx(0.9, rel=1e-5) and belief.prob_outside == pytest.approx(0.1)
