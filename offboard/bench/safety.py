@@ -215,21 +215,18 @@ def run_trial(observer: Observer, agent: LoopbackAgent, fault: str, lease_ms: in
     observer.teleport(*START)
     actors: list[Actor] = []
     try:
-        if fault == "link":
-            router_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-            router = Actor("router", router_endpoint, agent.endpoint, lease_ms=lease_ms)
-            actors.append(router)
-            router.go()
-            router.expect("ready")
-            planner = Actor("planner", router_endpoint, "--mode", "client", lease_ms=lease_ms)
-        else:
-            planner = Actor("planner", agent.endpoint, lease_ms=lease_ms)
-        actors.append(planner)
-        planner.go()
-        planner.expect("moving")
+        endpoint, mode = agent.endpoint, "peer"
+        if fault == "link":  # the planner, a client, reaches the agent only through this router
+            endpoint, mode = f"tcp/127.0.0.1:{free_tcp_port()}", "client"
+            actors.append(Actor("router", endpoint, agent.endpoint, lease_ms=lease_ms))
+            actors[-1].go()
+            actors[-1].expect("ready")
+        actors.append(Actor("planner", endpoint, "--mode", mode, lease_ms=lease_ms))
+        actors[-1].go()
+        actors[-1].expect("moving")
         offset_s = _wait_cruising(observer)
         time.sleep(rng.uniform(0.0, HEARTBEAT_PERIOD_S))
-        victim = router if fault == "link" else planner
+        victim = actors[0]  # the router if there is one, else the planner
         before = observer.truth()
         fault_s = time.monotonic()
         victim.signal(signal.SIGSTOP if fault == "freeze" else signal.SIGKILL)

@@ -22,10 +22,10 @@ import time
 
 import zenoh
 
-from offboard.robot.robot_client import RobotClient
+from offboard.robot.robot_client import CommandError, RobotClient, RobotUnavailable
 from shared import messages as m
 from shared.keys import RobotKeys
-from shared.rpc import RobotUnavailable, request
+from shared.rpc import request
 from shared.transport import DEFAULT_LEASE_MS, TransportConfig
 
 log = logging.getLogger(__name__)
@@ -55,7 +55,7 @@ def run_planner(endpoint: str, mode: str, lease_ms: int) -> None:
 def _drive(robot: RobotClient) -> None:
     try:
         log.info("drive ended: %s", robot.move(distance_m=DRIVE_M, speed_m_s=DRIVE_SPEED_M_S).status)
-    except Exception as exc:  # the bench judges by the robot, not by this reply
+    except (CommandError, RobotUnavailable) as exc:  # the bench judges by the robot, not by this reply
         log.info("drive ended: %s", exc)
 
 
@@ -80,7 +80,7 @@ def run_load(endpoint: str, seconds: float) -> None:
             try:
                 request(session, keys.state, m.StateRequest(f"load-{replies + errors}"), m.StateReply, 5.0)
                 replies += 1
-            except (RobotUnavailable, RuntimeError):
+            except RuntimeError:  # busy or unanswered (CommandError, RobotUnavailable): counted
                 errors += 1
     _say(json.dumps({"replies": replies, "errors": errors, "seconds": seconds}))
 

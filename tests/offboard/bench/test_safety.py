@@ -6,7 +6,13 @@ from contextlib import ExitStack
 
 import pytest
 
-from offboard.bench.safety import FAULTS, realtime_agent, run_trials, summarize, watchdog_ms
+from offboard.bench.safety import (
+    FAULTS,
+    realtime_agent,
+    run_trials,
+    summarize,
+    watchdog_ms,
+)
 from shared.transport import DEFAULT_LEASE_MS
 
 pytestmark = pytest.mark.integration

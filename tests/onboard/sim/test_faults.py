@@ -8,8 +8,8 @@ import time
 
 import pytest
 import zenoh
-
 from conftest import running_agent
+
 from offboard.robot.robot_client import CommandError
 from shared import messages as m
 from shared.codec import decode
@@ -32,7 +32,7 @@ def _odometry_times(robot, seconds: float) -> list[float]:
 
 
 def test_a_base_that_fails_mid_move_is_stopped_and_the_agent_serves_on(tmp_path, box_world):
-    with running_agent(tmp_path, "--world", str(box_world), "--start", "0.5,1.0,0", "--realtime") as (agent, robot):
+    with running_agent(tmp_path, "--world", str(box_world), "--start", "0.5,1.0,0", "--realtime") as (_, robot):
         _inject(robot, "base", after_s=0.6)
         with pytest.raises(CommandError) as err:
             robot.move(distance_m=4.0, speed_m_s=0.5)
@@ -48,7 +48,7 @@ def test_a_base_that_fails_mid_move_is_stopped_and_the_agent_serves_on(tmp_path,
 
 
 def test_a_failing_head_or_camera_is_answered_and_the_base_stops(tmp_path, box_world):
-    with running_agent(tmp_path, "--world", str(box_world), "--start", "0.5,1.0,0", "--realtime") as (agent, robot):
+    with running_agent(tmp_path, "--world", str(box_world), "--start", "0.5,1.0,0", "--realtime") as (_, robot):
         results = []
         mover = threading.Thread(target=lambda: results.append(robot.move(distance_m=4.0, speed_m_s=0.3)))
         mover.start()
