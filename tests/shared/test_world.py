@@ -53,8 +53,8 @@ def edit(old: str, new: str) -> str:
     return BASE.replace(old, new)
 
 
-def test_the_three_bundled_worlds_load():
-    assert bundled_world_names() == ["high-shelf", "office", "paper-lab"]
+def test_the_bundled_worlds_load():
+    assert bundled_world_names() == ["high-shelf", "office", "paper-lab", "paper-lab-one-sided"]
     for name in bundled_world_names():
         world = load_world(name)
         assert world.name == name
@@ -198,3 +198,10 @@ def test_yawed_target_footprint_and_picture_corners():
     viewer_right = np.cross(-target.facing(), [0.0, 0.0, 1.0])
     assert (corners[1] - corners[0]) @ viewer_right == pytest.approx(target.size_m[1])
     assert corners[0][2] > corners[3][2]
+
+
+def test_paper_lab_one_sided_differs_from_paper_lab_only_in_its_target_sides():
+    four, one = load_world("paper-lab"), load_world("paper-lab-one-sided")
+    assert (four.target.sides, one.target.sides) == (4, 1)
+    assert (four.room, four.obstacles, four.posters, four.start) == (one.room, one.obstacles, one.posters, one.start)
+    assert four.target.position_m == one.target.position_m and four.target.yaw_deg == one.target.yaw_deg
