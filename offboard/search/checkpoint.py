@@ -110,7 +110,11 @@ class Checkpointer:
         wall_s = self._wall_before_s + time.monotonic() - self._started
         header, arrays = capture(search)
         header.update(self._fixed, config=dataclasses.asdict(search.config), wall_time_s=wall_s)
-        self.size_bytes = write_file(self.path, header, arrays)
+        try:
+            self.size_bytes = write_file(self.path, header, arrays)
+        except OSError as exc:  # a full disk must not end the search: the previous checkpoint stays
+            log.error("checkpoint after action %d not written: %s", search.state.actions, exc)
+            return
         self.write_ms.append((time.perf_counter() - started) * 1000.0)
         log.info("checkpoint after action %d: %.1f MB in %.0f ms", search.state.actions, self.size_bytes / 1e6,
                  self.write_ms[-1])
@@ -276,14 +280,18 @@ def write_file(path: Path, header: dict, arrays: dict[str, np.ndarray]) -> int:
     head = json.dumps({"version": VERSION, **header, "arrays": table}).encode()
     start = _aligned(len(MAGIC) + 8 + len(head))
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(MAGIC + struct.pack("<Q", len(head)) + head)
-        for name, array in arrays.items():
-            f.seek(start + table[name]["offset"])
-            f.write(np.ascontiguousarray(array).data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(MAGIC + struct.pack("<Q", len(head)) + head)
+            for name, array in arrays.items():
+                f.seek(start + table[name]["offset"])
+                f.write(np.ascontiguousarray(array).data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     folder = os.open(path.parent, os.O_RDONLY)
     try:
         os.fsync(folder)  # the rename itself survives a power cut
