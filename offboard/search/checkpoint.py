@@ -198,7 +198,9 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
     search._pending_processing_s = float(part["pending_processing_s"])
     search.planner.set_processing_s(float(part["planner_processing_s"]))
     # The map-driven priors (support surfaces) remember the factor they applied: called once on the
-    # restored map without applying the result, they remember it again. (Saliency has no memory.)
+    # restored map without applying the result, they remember it again (exactly, unless the last
+    # action was a failed move, whose surveys changed the map after the last look). Saliency has
+    # no memory.
     for prior in search.dynamic_priors:
         prior(None, search)
     log.info("resumed after action %d (P[F] = %.3f)", search.state.actions, search.belief.success_prob)
