@@ -137,15 +137,19 @@ class GeometryCache:
         return ActionGeometry.stack(parts)
 
 
-def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSpheres) -> ActionValues:
+def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSpheres,
+             behind_surface_m: float = 0.0) -> ActionValues:
     """Expected detection probability of every (position, setting), covering probability of every
-    position; ``spheres`` are the positions' sensed spheres, in the geometry's order."""
+    position; ``spheres`` are the positions' sensed spheres, in the geometry's order. A block counts
+    up to half a block plus ``behind_surface_m`` beyond its direction's sphere radius (the target's
+    centre lies behind the face a look sees, as :func:`~offboard.planning.detection_function.look_footprint`
+    counts it)."""
     mass = np.ascontiguousarray(belief.coarse_mass().reshape(-1, belief.facing_sectors))
     radius = spheres.radius_m.reshape(len(geometry.positions_m), -1)
     rate = np.ascontiguousarray(geometry.table.rate)
     detection, covering = _score(mass, geometry.distance_m, geometry.sphere_bin, geometry.distance_bin,
                                  geometry.facing_bin, geometry.off_axis_bin, np.ascontiguousarray(radius),
-                                 geometry.block_margin_m, rate)
+                                 geometry.block_margin_m + behind_surface_m, rate)
     return ActionValues(detection, covering)
 
 

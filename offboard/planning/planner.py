@@ -63,6 +63,8 @@ class PlannerConfig:
     view_overlap: float = field(default=0.4, metadata=bounds(0.0, 0.9))  # between neighbouring settings
     same_position_m: float = field(default=0.5, metadata=bounds(0.0, 5.0))  # "here" for a candidate
     unknown_is_opaque: bool = False  # expected sensed spheres: unknown space hides what is behind it
+    behind_surface_m: float = field(default=0.12, metadata=bounds(0.0, 1.0))  # a target's centre lies behind its face:
+    # what a look counts as seen reaches this far behind the surface, in expectation (sensed spheres) as in fact
     sphere_resolution_m: float = field(default=0.1, metadata=bounds(0.01, 1.0))  # map used for radii
 
 
@@ -209,7 +211,7 @@ class SearchPlanner:
         rows = []
         for geometry in geometries:
             spheres = sensed_spheres(coarse, geometry.centers_m, self.bins, near, far, self.config.unknown_is_opaque)
-            rows.append(evaluate(geometry, self.belief, spheres))
+            rows.append(evaluate(geometry, self.belief, spheres, self.config.behind_surface_m))
         return ActionValues(np.vstack([r.detection_prob for r in rows]),
                             np.concatenate([r.covering_prob for r in rows]))
 

@@ -63,7 +63,6 @@ class SearchConfig:
     detection_sigma_m: float = field(default=0.1, metadata=bounds(0.01, 2.0))  # located centre's error, near
     empty_log_odds: float = field(default=-0.8, metadata=bounds(-20.0, 0.0))  # seen empty: no target centre there
     empty_factor: float = field(default=0.05, metadata=bounds(0.0, 1.0))  # what such a cube keeps (stereo errs)
-    behind_surface_m: float = field(default=0.12, metadata=bounds(0.0, 1.0))  # target centre behind its face
     max_actions: int = field(default=150, metadata=bounds(1, 10_000))
     planning_block_m: float = field(default=0.2, metadata=bounds(0.05, 2.0))  # the planner reads the belief in blocks
     max_planning_blocks: int = field(default=16_000, metadata=bounds(100, 10_000_000))  # larger rooms: larger blocks
@@ -182,7 +181,7 @@ class Search:
         table = self._planning_table()
         depth = visible_depth(None, self.occupancy, camera, self.intrinsics, self.mount.baseline_m, 16, table.range_m[1])
         look_footprint(self.occupancy.grid, camera, self.intrinsics, depth, 16, table, self.belief.facing_azimuths_rad,
-                       self.config.behind_surface_m)
+                       self.config.planner.behind_surface_m)
         log.info("planner ready in %.0f ms", (time.perf_counter() - started) * 1000.0)
 
     def _choose(self, pose: Pose2D) -> Decision:
@@ -276,7 +275,7 @@ class Search:
         depth = visible_depth(obs.disparity, self.occupancy, obs.camera_in_world, obs.intrinsics,
                               obs.baseline_m, 16, far)
         footprint = look_footprint(self.occupancy.grid, obs.camera_in_world, obs.intrinsics, depth, 16, table,
-                                   self.belief.facing_azimuths_rad, self.config.behind_surface_m)
+                                   self.belief.facing_azimuths_rad, self.config.planner.behind_surface_m)
         self.last_footprint = footprint
         if obs.detection is None:
             realised = self.belief.update_after_miss(footprint.cube_index, footprint.detection_prob)
