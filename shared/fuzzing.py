@@ -24,6 +24,7 @@ from typing import Any
 INSTALL_HINT = ("fuzzing needs hypothesis, a test extra: install it with "
                 "`.venv/bin/pip install -e '.[test]'` (or `pip install 'hypothesis>=6.100'`)")
 EXAMPLES_KEPT = 5
+BATCH = 20  # cases per hypothesis example: its engine costs more per example than most decoders do
 
 
 class MissingHypothesis(RuntimeError):
@@ -120,22 +121,24 @@ def run_target(target: FuzzTarget, cases: int) -> FuzzReport:
     """Run at least ``cases`` generated cases through ``target``; never stops at a failure."""
     require_hypothesis()
     from hypothesis import HealthCheck, Phase, given, settings
+    from hypothesis import strategies as st
 
     report = FuzzReport(target.name)
     started = time.perf_counter()
 
-    @settings(max_examples=cases, deadline=None, database=None, phases=[Phase.generate],
+    @settings(max_examples=-(-cases // BATCH), deadline=None, database=None, phases=[Phase.generate],
               suppress_health_check=list(HealthCheck))
-    @given(target.cases())
-    def run(case: Case) -> None:
-        report.cases += 1
-        outcome, problem = judge(target, case)
-        report.refused += outcome == "refused"
-        report.accepted += outcome == "accepted"
-        if problem is not None:
-            report.failures += 1
-            if len(report.examples) < EXAMPLES_KEPT:
-                report.examples.append(f"{problem} [input: {_shown(case.data)}]")
+    @given(st.lists(target.cases(), min_size=BATCH, max_size=BATCH))
+    def run(batch: list[Case]) -> None:
+        for case in batch:
+            report.cases += 1
+            outcome, problem = judge(target, case)
+            report.refused += outcome == "refused"
+            report.accepted += outcome == "accepted"
+            if problem is not None:
+                report.failures += 1
+                if len(report.examples) < EXAMPLES_KEPT:
+                    report.examples.append(f"{problem} [input: {_shown(case.data)}]")
 
     while report.cases < cases:  # a strategy with few distinct cases may stop early: go again
         run()

@@ -23,7 +23,7 @@ import zenoh
 from shared import messages as m
 from shared.codec import ProtocolError, decode, encode
 from shared.fuzz_targets import message_cases
-from shared.fuzzing import Case, names_field
+from shared.fuzzing import BATCH, Case, names_field
 from shared.keys import RobotKeys
 from shared.rpc import request
 
@@ -96,11 +96,11 @@ def live_queries(count: int, info: m.Info) -> list[LiveQuery]:
 
     found: list[LiveQuery] = []
 
-    @settings(max_examples=count, deadline=None, database=None, phases=[Phase.generate],
+    @settings(max_examples=-(-count // BATCH), deadline=None, database=None, phases=[Phase.generate],
               suppress_health_check=list(HealthCheck))
-    @given(queries())
-    def collect(query: LiveQuery) -> None:
-        found.append(query)
+    @given(st.lists(queries(), min_size=BATCH, max_size=BATCH))
+    def collect(batch: list[LiveQuery]) -> None:
+        found.extend(batch)
 
     while len(found) < count:
         collect()
