@@ -41,7 +41,6 @@ log = logging.getLogger(__name__)
 class Robot:
     devices: Devices
     sim: SimControl | None  # the simulator's own controls; None for the hardware backend
-    world: World  # the world the simulated parts render (the room the robot is told it is in)
 
 
 def build_robot(config: OnboardConfig, world: World) -> Robot:
@@ -49,7 +48,7 @@ def build_robot(config: OnboardConfig, world: World) -> Robot:
     ``PtuError``, ``CalibrationFileError``) naming it, after closing those already open."""
     if config.backend == "sim":
         robot = build_sim_robot(config, world)
-        return Robot(robot.devices, robot, robot.world)
+        return Robot(robot.devices, robot)
     return _build_hardware(config, world)
 
 
@@ -87,7 +86,7 @@ def _build_hardware(config: OnboardConfig, world: World) -> Robot:
         camera = _camera(config, world, clock, base, pantilt, truth)
         opened.pop_all()
     log.info("hardware backend: base %s, pan-tilt %s, camera %s", hw.base.port, hw.pantilt.port, hw.camera.device)
-    return Robot(Devices("hardware", clock, base, pantilt, camera), None, world)
+    return Robot(Devices("hardware", clock, base, pantilt, camera), None)
 
 
 def _camera(config: OnboardConfig, world: World, clock: SimClock, base: Base, pantilt: PanTilt,

@@ -21,11 +21,12 @@ from onboard.backends import build_robot
 from onboard.config import HardwareConfig, OnboardConfig, SimConfig
 from onboard.devices import Devices
 from onboard.emulators.robot import EmulatedRobot
+from onboard.hardware.fault import DeviceFault
 from onboard.hardware.pioneer import PioneerConfig
 from onboard.hardware.ptu import PtuConfig
+from onboard.sim.world import load_world
 from shared.geometry import Pose2D
 from shared.world import World
-from onboard.sim.world import load_world
 
 # paper-lab, facing +x between the west shelf (its face 0.79 m behind) and the centre table
 START = (1.5, 2.5, 0.0)
@@ -203,5 +204,5 @@ def _move_or_fault(devices: Devices) -> str:
     """A long drive's end: stopped, or a fault once the port is gone."""
     try:
         return devices.base.move(0.0, 3.0, 0.3, threading.Event()).status
-    except Exception:
+    except DeviceFault:
         return "fault"
