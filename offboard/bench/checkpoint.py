@@ -88,6 +88,7 @@ def run(writes: int = 15, looks: int = LOOKS) -> dict:
             encode_ms.append((encoded - started) * 1000.0)
             write_ms.append((done - started) * 1000.0)
             cpu_ms.append((time.thread_time() - cpu) * 1000.0)
+        checkpoint.decode_maps(checkpoint.read(Path(tmp)))  # compile the decoder
         started = time.perf_counter()
         state, odds, observed = checkpoint.decode_maps(checkpoint.read(Path(tmp)))
         read_ms = (time.perf_counter() - started) * 1000.0

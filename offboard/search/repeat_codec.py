@@ -15,8 +15,9 @@ size plus one bit per value). An occupancy grid codes the same way with one valu
 unobserved zeros are runs of one reference.
 
 The stored values are few distinct ones (a belief's change comes from a detectability table's
-cells: a few thousand values among millions), so when there are at most 65,536 of them they are
-stored once, in a palette, and the stream holds 16-bit indices into it: half the size.
+cells: a few thousand values among millions), so they are stored once, in a palette, and the stream
+holds indices into it: 16-bit ones for at most 65,536 distinct values (half the size), else 24-bit
+ones (three bytes each) for at most 2,097,152; beyond that, the values themselves.
 """
 
 from __future__ import annotations
@@ -26,18 +27,19 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-PALETTE_HASH_BITS = 17  # the palette's hash table: 131,072 slots for at most 65,536 values
+# (hash table bits, index dtype, most distinct values): the table has twice the slots, so probes stay short
+PALETTES = ((17, np.uint16, 1 << 16), (22, np.uint32, 1 << 21))
 
 @dataclass(frozen=True)
 class Encoded:
     """An encoded array: ``flags`` (packed bits, row by row: new reference, then one per sector) and
-    the ``values`` stream (uint32 bit patterns, or uint16 indices into ``palette``), plus what the
-    decoder needs to rebuild it."""
+    the ``values`` stream (uint32 bit patterns, or indices into ``palette``: uint16, or uint8 triplets
+    little-endian), plus what the decoder needs to rebuild it."""
 
     shape: tuple[int, ...]
     dtype: str
     flags: np.ndarray  # uint8
-    values: np.ndarray  # uint32, or uint16 with a palette
+    values: np.ndarray  # uint32; with a palette uint16, or uint8 (three per index)
     palette: np.ndarray | None = None  # uint32
 
     @property
@@ -54,10 +56,15 @@ def encode(array: np.ndarray) -> Encoded:
     flags = np.zeros(-(-rows.shape[0] * (width + 1) // 8), np.uint8)
     values = np.empty(rows.size + rows.shape[0], np.uint32)
     count = _encode(rows, flags, values)
-    codes, palette, distinct = _palette(values[:count], PALETTE_HASH_BITS)
-    if distinct < 0:
-        return Encoded(tuple(array.shape), array.dtype.str, flags, values[:count].copy())
-    return Encoded(tuple(array.shape), array.dtype.str, flags, codes, palette[:distinct].copy())
+    for bits, index_dtype, most in PALETTES:
+        codes, palette = np.empty(count, index_dtype), np.empty(most, np.uint32)
+        distinct = _palette(values[:count], bits, codes, palette)
+        index_bytes = 2 if index_dtype == np.uint16 else 3  # 2**21 indices fit in three bytes
+        if distinct >= 0 and distinct * 4 + count * index_bytes < count * 4:  # the palette pays for itself
+            if index_bytes == 3:
+                codes = codes.view(np.uint8).reshape(-1, 4)[:, :3].reshape(-1)
+            return Encoded(tuple(array.shape), array.dtype.str, flags, codes, palette[:distinct].copy())
+    return Encoded(tuple(array.shape), array.dtype.str, flags, values[:count].copy())
 
 
 def decode(encoded: Encoded) -> np.ndarray:
@@ -67,16 +74,25 @@ def decode(encoded: Encoded) -> np.ndarray:
     n_rows = int(np.prod(shape, dtype=np.int64)) // width
     if dtype.itemsize != 4 or encoded.flags.size != -(-n_rows * (width + 1) // 8):
         raise ValueError(f"encoded array of shape {shape} and dtype {dtype}: flags of the wrong size")
-    values = encoded.values
-    if encoded.palette is not None:
-        if values.dtype != np.uint16 or (values.size and int(values.max()) >= encoded.palette.size):
-            raise ValueError(f"encoded array of shape {shape}: indices beyond its palette of {encoded.palette.size}")
-        values = encoded.palette[values]
+    values = encoded.values if encoded.palette is None else _looked_up(encoded)
     rows = np.empty((n_rows, width), np.uint32)
     used = _decode(np.ascontiguousarray(encoded.flags, np.uint8), np.ascontiguousarray(values, np.uint32), rows)
-    if used != encoded.values.size:
-        raise ValueError(f"encoded array of shape {shape}: {encoded.values.size} values stored, {used} used")
+    if used != values.size:
+        raise ValueError(f"encoded array of shape {shape}: {values.size} values stored, {used} used")
     return rows.view(dtype).reshape(shape)
+
+
+def _looked_up(encoded: Encoded) -> np.ndarray:
+    """The values a palette's indices stand for."""
+    codes = encoded.values
+    if codes.dtype == np.uint8 and codes.size % 3 == 0:
+        triplets = codes.reshape(-1, 3).astype(np.uint32)
+        codes = triplets[:, 0] | triplets[:, 1] << 8 | triplets[:, 2] << 16
+    elif codes.dtype != np.uint16:
+        raise ValueError(f"palette indices must be uint16 or uint8 triplets, not {codes.dtype} × {codes.size}")
+    if codes.size and int(codes.max()) >= encoded.palette.size:
+        raise ValueError(f"encoded array of shape {encoded.shape}: indices beyond its palette of {encoded.palette.size}")
+    return encoded.palette[codes]
 
 
 @numba.njit(cache=True)
@@ -130,14 +146,13 @@ def _decode(flags, values, rows):
 
 
 @numba.njit(cache=True)
-def _palette(values, bits):
-    """uint16 indices of ``values`` into their distinct values (in order of first appearance), by
-    an open-addressing hash table; the count is -1 if there are more than 65,536."""
+def _palette(values, bits, codes, palette):
+    """Fill ``codes`` with the indices of ``values`` into ``palette``, their distinct values in order
+    of first appearance, by an open-addressing hash table of ``2**bits`` slots; return how many
+    there are, or -1 if more than ``palette`` holds."""
     mask = np.uint64((1 << bits) - 1)
     keys = np.empty(1 << bits, np.uint32)
     slots = np.full(1 << bits, -1, np.int32)
-    codes = np.empty(values.size, np.uint16)
-    palette = np.empty(65536, np.uint32)
     n = 0
     last_value, last_code = np.uint32(0), -1
     for i in range(values.size):
@@ -149,13 +164,13 @@ def _palette(values, bits):
         while slots[h] != -1 and keys[h] != v:
             h = (h + np.uint64(1)) & mask
         if slots[h] == -1:
-            if n == 65536:
-                return codes, palette, -1
+            if n == palette.size:
+                return -1
             keys[h], slots[h], palette[n] = v, n, v
             n += 1
         codes[i] = slots[h]
         last_value, last_code = v, slots[h]
-    return codes, palette, n
+    return n
 
 
 @numba.njit(cache=True, inline="always")
