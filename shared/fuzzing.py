@@ -79,7 +79,7 @@ def names_field(exc: BaseException, case: Case) -> bool:
     field) may name any part of the path (``obstacle`` for a moved ``obstacle[2].min``) or the
     other field (``robot.start`` when an obstacle moved onto the robot).
     """
-    message = str(exc)
+    message = _GOT.sub("", str(exc))  # the offending value may hold every key of the input: not a name
     if case.field is None:
         return True
     if case.field in message or re.sub(r"\[\d+\]$", "", case.field) in message:
@@ -99,6 +99,7 @@ def named_key(exc: BaseException) -> str:
     return match.group(1) if match else ""
 
 
+_GOT = re.compile(r" \(got .*\)$", re.DOTALL)  # how StructureError ends its message
 _KEY_PREFIX = re.compile(r"^([A-Za-z_]\w*(?:\[\d+\])?(?:\.[A-Za-z_]\w*(?:\[\d+\])?)*): ")
 
 
