@@ -79,6 +79,16 @@ def test_a_restored_belief_goes_on_exactly_as_the_original(tmp_path):
     assert resumed.success_prob == belief.success_prob and resumed.prob_outside == belief.prob_outside
 
 
+def test_the_saved_states_cover_everything_the_belief_and_the_tracker_hold():
+    """A field added to either without a place in its state() would be lost by a resume."""
+    belief, _ = _looked_at(6)
+    saved = belief.state()
+    fixed = {"grid", "facing_sectors", "coarse_factor", "coarse_shape"}  # given to the constructor, or derived
+    assert {name.lstrip("_") for name in vars(belief)} - fixed == set(saved)
+    tracker = PoseTracker(Pose2D(0.0, 0.0, 0.0))
+    assert {name.lstrip("_") for name in vars(tracker)} - {"model"} == set(tracker.state())
+
+
 def test_a_belief_of_another_shape_is_refused():
     belief, _ = _looked_at(3)
     other = TargetBelief(GRID, facing_sectors=4, prob_outside=0.05, coarse_factor=2)
