@@ -28,6 +28,7 @@ import zenoh
 
 from onboard.config import OnboardConfig
 from onboard.devices import Devices, SimControl
+from onboard.hardware.fault import DeviceFault
 from shared import messages as m
 from shared.codec import ProtocolError, decode, encode
 from shared.keys import RobotKeys
@@ -344,9 +345,16 @@ class Agent:
                             head.moving, base.stalled, self.devices.clock.now_s())
 
     def _publish_loop(self) -> None:
-        period, seq = 1.0 / self.config.publish_hz, 0
+        period, seq, down = 1.0 / self.config.publish_hz, 0, False
         while not self._shutdown.wait(period):
-            s = self.state()
+            try:
+                s = self.state()
+            except DeviceFault as exc:  # a serial link down: nothing true to publish until it is back
+                if not down:
+                    log.warning("not publishing while a device cannot be read: %s", exc)
+                down = True
+                continue
+            down = False
             self._odometry_pub.put(encode(m.Odometry(seq, s.pose, s.speed_m_s, s.turn_rate_deg_s,
                                                      s.base_moving, s.stalled, s.robot_time_s)))
             self._pantilt_pub.put(encode(m.PanTiltState(seq, s.pan_deg, s.tilt_deg, s.pantilt_moving,
@@ -360,7 +368,10 @@ class Agent:
             self._wake_watchdog.wait(wait_s)
             self._wake_watchdog.clear()
             wait_s = _WATCHDOG_POLL_S
-            if not self.devices.base.reading().moving:
+            try:
+                if not self.devices.base.reading().moving:
+                    continue
+            except DeviceFault:  # link down: no stop could reach the base; its firmware halts it (2 s)
                 continue
             silent_s = time.monotonic() - self._watch.last_contact_s
             if self._watch.token_lost:

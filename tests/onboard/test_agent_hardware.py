@@ -1,0 +1,87 @@
+"""The agent over the hardware backend (the real drivers, the emulators on pseudo-terminals) when the
+Pioneer's serial link drops: state and motion are refused as ``device`` errors while it is down,
+the agent keeps serving, and once the cable is back the driver reconnects and publishing resumes."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import threading
+import time
+
+import pytest
+
+from onboard.agent import Agent
+from onboard.backends import build_robot
+from onboard.config import HardwareConfig, OnboardConfig
+from onboard.emulators.robot import EmulatedRobot
+from onboard.hardware.pioneer import PioneerConfig
+from onboard.hardware.ptu import PtuConfig
+from onboard.sim.world import load_world
+from shared import messages as m
+from shared.keys import RobotKeys
+from shared.launch import free_tcp_port
+from shared.rpc import CommandError, RobotUnavailable, request
+from shared.transport import TransportConfig
+
+pytestmark = pytest.mark.integration
+
+FAST_LINK = dict(link_timeout_ms=300, reconnect_period_ms=200, sync_reply_timeout_ms=200, stale_session_wait_ms=100)
+_ids = (f"c{i}" for i in itertools.count())
+
+
+def _ask(session, key: str, command, expected):
+    """The reply, the error code the agent answered, or "unavailable" (before the session's routes exist)."""
+    try:
+        return request(session, key, command, expected, 5.0)
+    except CommandError as exc:
+        return exc.code
+    except RobotUnavailable:
+        return "unavailable"
+
+
+def _until(predicate, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_a_dropped_serial_link_is_a_device_error_then_the_agent_serves_again():
+    world = load_world("paper-lab")
+    keys = RobotKeys("hw")
+    with EmulatedRobot(OnboardConfig(), world, "paper-lab") as emulated:
+        ports = emulated.ports()
+        config = dataclasses.replace(OnboardConfig(), backend="hardware", watchdog_ms=10_000,  # no heartbeats here
+                                     hardware=HardwareConfig(
+            PioneerConfig(port=ports["base"], **FAST_LINK), PtuConfig(port=ports["pantilt"]), truth=ports["truth"]))
+        devices = build_robot(config, world).devices
+        endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+        agent_session = TransportConfig(listen=(endpoint,), multicast_scouting=False).open()
+        stop = threading.Event()
+        runner = threading.Thread(target=Agent(config, devices, agent_session, "hw").run, args=(stop,))
+        runner.start()
+        try:
+            with TransportConfig(robot_id="hw", connect=(endpoint,), multicast_scouting=False).open() as session:
+                published: list[float] = []
+                session.declare_subscriber(keys.odometry, lambda _: published.append(time.monotonic()))
+                state = lambda: _ask(session, keys.state, m.StateRequest(next(_ids)), m.StateReply)  # noqa: E731
+                assert _until(lambda: isinstance(state(), m.StateReply), 10.0)
+
+                emulated.pioneer.unplug()
+                assert _until(lambda: state() == "device", 3.0)
+                move = m.MoveCommand(next(_ids), distance_m=0.5)
+                assert _ask(session, keys.move, move, m.MoveResult) == "device"
+                quiet_since = time.monotonic()
+
+                emulated.pioneer.plug()
+                assert _until(lambda: isinstance(state(), m.StateReply), 5.0)
+                assert _until(lambda: any(t > quiet_since for t in published), 2.0)  # publishing resumed
+                moved = _ask(session, keys.move, m.MoveCommand(next(_ids), distance_m=0.2), m.MoveResult)
+                assert moved.status == "done" and moved.distance_m == pytest.approx(0.2, abs=0.03)
+        finally:
+            stop.set()
+            runner.join(timeout=10.0)
+            agent_session.close()
