@@ -141,6 +141,15 @@ def test_damaged_checkpoints_are_refused_naming_the_problem(tmp_path):
     assert not list(tmp_path.glob(".*.tmp"))  # the atomic write left no temporary behind
 
 
+def test_the_command_line_says_what_is_missing(tmp_path):
+    from offboard.cli import main
+
+    with pytest.raises(SystemExit, match="--target-picture is required"):
+        main(["search", "--connect", "tcp/127.0.0.1:1"])
+    with pytest.raises(SystemExit, match="--resume: .*cannot read the checkpoint"):
+        main(["search", "--resume", str(tmp_path)])
+
+
 # --- a killed planner, resumed ---------------------------------------------------------------------
 
 START = "1.7,3.3,-90"  # paper-lab's target is 1.2 m behind the robot, on the bench to the north
