@@ -184,7 +184,7 @@ class _RunWorker:
                                 cost=run.cost or 3, priors=(spec.prior_spec,), budget_s=spec.budget_s,
                                 move_threshold=spec.move_threshold,
                                 config_path=None if spec.config_path is None else Path(spec.config_path),
-                                out_dir=Path(spec.out_dir), record=False)
+                                out_dir=Path(spec.out_dir), record=False, checkpoint=False)  # a failed run is re-run
         return run_search(transport, request, policy, self._detectors)
 
     def close(self) -> None:
