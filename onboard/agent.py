@@ -346,7 +346,11 @@ class Agent:
 
     def _publish_loop(self) -> None:
         period, seq, down = 1.0 / self.config.publish_hz, 0, False
-        while not self._shutdown.wait(period):
+        due = time.monotonic() + period
+        while not self._shutdown.wait(max(0.0, due - time.monotonic())):
+            # A fixed schedule: a late wake-up shortens the next wait instead of slowing the rate
+            # (on a busy machine, waiting a whole period after each late tick gave 8 Hz, not 10).
+            due = max(due + period, time.monotonic())
             try:
                 s = self.state()
             except DeviceFault as exc:  # a serial link down: nothing true to publish until it is back
