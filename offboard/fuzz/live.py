@@ -55,7 +55,7 @@ class LiveReport:
     by_code: dict[str, int] = field(default_factory=dict)
     failures: int = 0
     examples: list[str] = field(default_factory=list)
-    odometry_max_gap_ms: float = 0.0  # during the fuzz
+    odometry_max_gap_ms: float | None = None  # during the fuzz
     state_after_ok: bool = False
     pose_unchanged: bool = False
     odometry_hz_after: float = 0.0
@@ -146,10 +146,12 @@ class _OdometryWatch:
         with self._lock:
             self.times.append(time.monotonic())
 
-    def max_gap_ms(self, since: float) -> float:
+    def max_gap_ms(self, since: float) -> float | None:
+        """The longest wait between two samples since ``since`` (None: fewer than two came)."""
         with self._lock:
             times = [t for t in self.times if t >= since]
-        return max((b - a for a, b in zip(times, times[1:])), default=float("inf")) * 1000.0
+        gaps = [b - a for a, b in zip(times, times[1:])]
+        return round(max(gaps) * 1000.0, 1) if gaps else None
 
     def rate_hz(self, window_s: float) -> float:
         start = time.monotonic()
@@ -181,7 +183,7 @@ def run_live(session: zenoh.Session, robot_id: str, count: int) -> LiveReport:
         report.seconds = round(time.monotonic() - started, 2)
         report.queries = len(queries)
         report.queries_per_s = round(report.queries / max(report.seconds, 1e-9), 1)
-        report.odometry_max_gap_ms = round(watch.max_gap_ms(started), 1)
+        report.odometry_max_gap_ms = watch.max_gap_ms(started)
         after = request(session, keys.state, m.StateRequest("fuzz-after"), m.StateReply, 5.0).state.pose
         report.state_after_ok = True
         report.pose_unchanged = (after.x_m, after.y_m, after.heading_deg) == (before.x_m, before.y_m, before.heading_deg)
