@@ -6,7 +6,8 @@ command outside the device limits. Each must be answered with an ``ErrorReply`` 
 ``protocol`` (whose message names the broken field) or ``limit``: silence, a success, another code
 or a crash is a failure. Queries are kept a few in flight, well under the agent's command queue,
 so ``busy`` never legitimately happens. Afterwards the agent must still answer ``state``, the
-robot must not have moved, and odometry must still arrive at its rate (measured over 2 s).
+robot must not have moved, and odometry must still arrive at 10 Hz (measured over 2 s, and over
+2 s before the fuzz too, to tell a loaded machine from a degraded agent).
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ class LiveReport:
     odometry_max_gap_ms: float | None = None  # during the fuzz
     state_after_ok: bool = False
     pose_unchanged: bool = False
+    odometry_hz_before: float = 0.0
     odometry_hz_after: float = 0.0
     agent_alive: bool | None = None  # known when this process started the agent
     agent_tracebacks: int | None = None  # in its log
@@ -171,6 +173,7 @@ def run_live(session: zenoh.Session, robot_id: str, count: int) -> LiveReport:
     before = request(session, keys.state, m.StateRequest("fuzz-before"), m.StateReply, 5.0).state.pose
     watch = _OdometryWatch(session, keys)
     try:
+        report.odometry_hz_before = round(watch.rate_hz(ODOMETRY_WINDOW_S), 2)  # what the machine allows
         started = time.monotonic()
         pending: collections.deque = collections.deque()
         for query in queries:
