@@ -200,6 +200,7 @@ def _moves(slot: Slot, wire: bool) -> list[st.SearchStrategy[tuple[str, Any, boo
     if slot.kind != "any":
         wrong = [v for v in _wrong_values(slot.kind, wire) + ([None] if wire and not slot.nullable else [])
                  if isinstance(v, bool) or v not in slot.options]  # a Literal may take 1 or ""
+        wrong += [float(o) for o in slot.options if type(o) is int]  # 3.0 equals 3 but is no integer
         moves.append(move("wrong type", st.sampled_from(wrong)))
     if isinstance(slot.route[-1], str):  # a key, not a list item
         moves.append(move("key removed", st.none(), exact=slot.required, refuse=slot.required))

@@ -97,8 +97,8 @@ def _convert(tp: Any, value: Any, where: str, error: type[StructureError],
             raise error(where, value, "must not be null")
         (inner,) = [o for o in options if o is not type(None)]
         return _convert(inner, value, where, error, array_decoder)
-    if origin is Literal:
-        if value not in typing.get_args(tp) or isinstance(value, bool):
+    if origin is Literal:  # by type too: 3.0 and True equal 3 and 1 but are no such option
+        if not any(value == o and type(value) is type(o) for o in typing.get_args(tp)):
             raise error(where, value, f"must be one of {list(typing.get_args(tp))}")
         return value
     if origin is tuple:

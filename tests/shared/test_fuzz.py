@@ -135,3 +135,19 @@ def test_the_toml_writer_round_trips_what_the_fuzzer_writes():
             "room": {"size": [1, 2.5, 3], "sub": {"a": True}}, "obstacle": [{"min": [0, 0]}, {"k": {"i": 1}}]}
     assert tomllib.loads(toml_writer.dumps(data)) == data
     assert math.isnan(tomllib.loads(toml_writer.dumps({"v": math.nan}))["v"])
+
+
+def test_a_literal_option_must_have_its_type_too():
+    from dataclasses import dataclass
+    from typing import Literal
+
+    from shared.strict import StructureError, build
+
+    @dataclass(frozen=True)
+    class Costed:
+        cost_function: Literal[1, 2, 3, 4] = 3
+
+    for value in (3.0, True):
+        with pytest.raises(StructureError, match="^cost_function:"):
+            build(Costed, {"cost_function": value})
+    assert build(Costed, {"cost_function": 2}).cost_function == 2
