@@ -30,8 +30,6 @@ import msgpack
 import numpy as np
 from hypothesis import strategies as st
 
-from shared.fuzzing import Case
-
 HUGE_INT = 10**400  # TOML integers are unbounded: no float holds this
 _UNKNOWN_KEY = "surplus_key"
 

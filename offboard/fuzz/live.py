@@ -13,6 +13,7 @@ robot must not have moved, and odometry must still arrive at 10 Hz (measured ove
 from __future__ import annotations
 
 import collections
+import itertools
 import logging
 import threading
 import time
@@ -152,7 +153,7 @@ class _OdometryWatch:
         """The longest wait between two samples since ``since`` (None: fewer than two came)."""
         with self._lock:
             times = [t for t in self.times if t >= since]
-        gaps = [b - a for a, b in zip(times, times[1:])]
+        gaps = [b - a for a, b in itertools.pairwise(times)]
         return round(max(gaps) * 1000.0, 1) if gaps else None
 
     def rate_hz(self, window_s: float) -> float:

@@ -1,8 +1,8 @@
 """Live fuzz against a real agent process over Zenoh on loopback."""
 
 import pytest
-
 from conftest import client_transport
+
 from offboard.fuzz.live import LiveQuery, LiveReport, _judge, run_live
 from shared import messages as m
 from shared.codec import encode
