@@ -206,8 +206,7 @@ class Search:
         log.info("decision %d: %s — %s (P=%.3f, t=%.1f s)", len(self.state.planning_ms), decision.kind,
                  decision.reason, decision.detection_prob, decision.time_s)
         if self.recorder and decision.values is not None:
-            self.recorder.log_plan(decision.values, self.planner.positions, self.config.planner.grid_spacing_m,
-                                   self.config.room_m)
+            self.recorder.log_plan(decision.values, self.planner.positions)
         return decision
 
     def _move(self, decision: Decision) -> None:
@@ -241,8 +240,8 @@ class Search:
         self.state.actions += 1
         self.state.taken.add(decision.setting)
         realised, found = self._interpret(obs, table)
-        if obs.detection is not None:
-            self.state.taken.discard(decision.setting)  # a detection is worth confirming from the same view
+        if obs.target_m is not None:  # a located detection is worth confirming from the same view; one
+            self.state.taken.discard(decision.setting)  # without depth needs another view to place it
         processing_s = self._pending_processing_s + time.perf_counter() - started  # the wall clock's part
         self._account(decision, obs, realised, motion_s, processing_s)
         self.state.looks.append(LookTrace(obs.pose.x_m, obs.pose.y_m, decision.azimuth_rad,
@@ -306,17 +305,22 @@ class Search:
             grid, footprint.cube_index, footprint.detection_prob, located, alpha))
         if obs.target_m is None:
             log.info("%s detection without stereo depth: the belief gathers along its rays", obs.detection.detector)
-            return False
-        near = self.belief.mass_near(obs.target_m, self.config.found_radius_m)
-        self.state.estimate_m = obs.target_m
+        estimate = obs.target_m if obs.target_m is not None else self._most_likely_m()  # rays from two views cross
+        near = self.belief.mass_near(estimate, self.config.found_radius_m)
+        self.state.estimate_m = estimate
         if near >= self.config.found_prob:
             self.state.status, self.state.found = "found", True
-            log.info("target found at %s (P within %.2f m: %.3f)", np.round(obs.target_m, 2),
-                     self.config.found_radius_m, near)
+            log.info("target found at %s (P within %.2f m: %.3f)", np.round(estimate, 2), self.config.found_radius_m, near)
             return True
-        log.info("%s detection at %s: P within %.2f m is %.3f < %.2f; looking on", "confident" if confident else "weak",
-                 np.round(obs.target_m, 2), self.config.found_radius_m, near, self.config.found_prob)
+        log.info("%s detection, estimate %s: P within %.2f m is %.3f < %.2f; looking on",
+                 "confident" if confident else "weak", np.round(estimate, 2), self.config.found_radius_m, near,
+                 self.config.found_prob)
         return False
+
+    def _most_likely_m(self) -> np.ndarray:
+        """Centre of the cube the belief holds most likely to hold the target's centre."""
+        p = self.belief.target_prob
+        return self.occupancy.grid.center_of(np.array(np.unravel_index(int(np.argmax(p)), p.shape)))
 
     def _to_target_centre(self, obs: Observation) -> Observation:
         """The detection locates the pictured face; the target's centre is half its depth behind it,

@@ -9,7 +9,7 @@ Entity tree (it mirrors the frame tree):
 - ``world/occupancy`` — occupied cubes coloured by log-odds; ``world/target_prob`` — the most likely
   cubes coloured by probability; ``world/path``, ``world/looks``, ``world/target_estimate``;
 - ``maps/target_prob`` — the column-sum target probability map; ``maps/position_prob`` — the
-  covering probability of every candidate position (report §5.1);
+  candidate positions (metres) coloured by covering probability (report §5.1);
 - ``plan/utility`` — every action's expected detection probability; ``stats/…`` — scalars;
 - ``logs`` — Python logging.
 
@@ -155,14 +155,15 @@ class Recorder:
         column = belief.column_map()
         s.log("maps/target_prob", rr.Image(_to_image(column)))
 
-    def log_plan(self, values: ActionValues, positions: np.ndarray, spacing_m: float, room_m) -> None:
+    def log_plan(self, values: ActionValues, positions: np.ndarray) -> None:
+        """Every action's expected detection probability, and the candidate positions (the report's
+        grid vertices and the viewpoints aimed at the belief, in metres) coloured by covering
+        probability."""
         s = self.stream
         s.log("plan/utility", rr.BarChart(values.detection_prob[:-1].reshape(-1)))
-        nx, ny = int(round(room_m[0] / spacing_m)) - 1, int(round(room_m[1] / spacing_m)) - 1
-        image = np.zeros((max(nx, 1), max(ny, 1)))
-        for (x, y), value in zip(positions, values.covering_prob[:-1]):
-            image[int(round(x / spacing_m)) - 1, int(round(y / spacing_m)) - 1] = value
-        s.log("maps/position_prob", rr.Image(_to_image(image)))
+        covering = values.covering_prob[:-1]
+        s.log("maps/position_prob", rr.Points2D(positions, radii=0.1,
+                                                colors=_ramp(covering, max(float(covering.max(initial=0.0)), 1e-12), hot=True)))
 
     def log_stats(self, **scalars: float) -> None:
         for name, value in scalars.items():
