@@ -1,6 +1,7 @@
 """``syt-onboard``: the agent on the robot, plus ``render`` (a world preview) and ``bench``.
 
     syt-onboard --backend sim --world paper-lab [--start X,Y,HEADING_DEG] [--target X,Y,Z,YAW_DEG]
+    syt-onboard --backend hardware --config robot.toml    the serial drivers of [hardware.*] (onboard/backends.py)
     syt-onboard render --world FILE [--start ..] [--pan DEG] [--tilt DEG] --out DIR
     syt-onboard bench [--backend hardware [--port PORT]] --json
     syt-onboard picture NAME --out FILE.png          a built-in picture (the target's) for the planner
