@@ -23,8 +23,8 @@ pytestmark = pytest.mark.integration
 
 
 @contextlib.contextmanager
-def emulate(*args: str) -> Iterator[dict]:
-    """``syt-onboard emulate`` until the block ends (SIGINT); yields its announced ports."""
+def emulate(*args: str, stop: signal.Signals = signal.SIGINT) -> Iterator[dict]:
+    """``syt-onboard emulate`` until the block ends (then ``stop``); yields its announced ports."""
     process = subprocess.Popen([sys.executable, "-m", "onboard.cli", "emulate", *args], stdout=subprocess.PIPE,
                                stderr=subprocess.DEVNULL, text=True)
     try:
@@ -32,7 +32,7 @@ def emulate(*args: str) -> Iterator[dict]:
         assert line, f"emulate printed nothing (exit {process.poll()})"
         yield json.loads(line)
     finally:
-        process.send_signal(signal.SIGINT)
+        process.send_signal(stop)
         process.wait(timeout=10)
     assert process.returncode == 0
 
@@ -51,8 +51,8 @@ def hardware_config(ports: dict, path: Path) -> Path:
     return path
 
 
-def test_emulate_announces_its_ports_and_the_truth_then_stops_on_sigint():
-    with emulate("--world", "office", "--start", "5,1.2,45") as ports:
+def test_emulate_announces_its_ports_and_the_truth_then_stops_on_sigterm():
+    with emulate("--world", "office", "--start", "5,1.2,45", stop=signal.SIGTERM) as ports:
         assert set(ports) == {"base", "pantilt", "truth"}
         assert Path(ports["base"]).exists() and Path(ports["pantilt"]).exists()
         link = TruthLink(ports["truth"])
