@@ -19,6 +19,7 @@ def test_offboard_decoders_pass_a_short_fuzz(target):
     assert report.refused > 30
 
 
+@pytest.mark.integration
 def test_the_command_merges_both_sides_into_one_json():
     run = subprocess.run([sys.executable, "-m", "offboard.cli", "fuzz", "--cases", "20", "--only", "hints",
                           "--only", "arcos", "--json"], capture_output=True, text=True, timeout=180, check=False)
@@ -28,6 +29,7 @@ def test_the_command_merges_both_sides_into_one_json():
     assert all(d["cases"] >= 20 for d in result["decoders"]) and result["failures"] == 0
 
 
+@pytest.mark.integration
 def test_without_hypothesis_the_command_says_how_to_install_it(tmp_path):
     (tmp_path / "hypothesis").mkdir()
     (tmp_path / "hypothesis" / "__init__.py").write_text("raise ImportError('no hypothesis here')\n")
