@@ -7,6 +7,7 @@
     syt-offboard bench safety --json [--load] [--trials N]  stop latencies when the planner is lost
     syt-offboard calibrate-detector --detector sift --target-picture P --out TABLE.json
     syt-offboard experiment --preset paper --out DIR [--baselines] [--jobs N]
+    syt-offboard fuzz --cases N [--json]            every decoder; --live: malformed queries to an agent
 """
 
 from __future__ import annotations
@@ -240,6 +241,11 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--lease-ms", type=int, default=DEFAULT_LEASE_MS, help="safety: the Zenoh link lease")
     bench.add_argument("--load", action="store_true", help="safety: also measure under load (4 state clients)")
     bench.set_defaults(func=_bench)
+    from offboard.fuzz import command as fuzz  # its options live with it
+
+    fuzzing = sub.add_parser("fuzz", help="fuzz every decoder (hypothesis), or a running agent with --live")
+    fuzz.add_arguments(fuzzing)
+    fuzzing.set_defaults(func=fuzz.main)
     return parser
 
 
