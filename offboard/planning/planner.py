@@ -221,11 +221,10 @@ class SearchPlanner:
         dx, dy = self.positions[:, 0] - pose.x_m, self.positions[:, 1] - pose.y_m
         arrival = np.arctan2(dy, dx)
         turn = np.where(np.hypot(dx, dy) > 1e-6, np.angle(np.exp(1j * (arrival - pose.heading_rad))), 0.0)
-        lengths = np.asarray(path_lengths_m, float)
-        travel = self.time_model.base.turn_time_s(turn) + self.time_model.base.drive_time_s(np.where(np.isfinite(lengths), lengths, 0.0))
+        travel = self.time_model.travel_s(path_lengths_m, turn)
         looks = self.time_model.look_times_s(arrival[:, None], 0.0, 0.0, self.settings.azimuth_rad[None],
                                              self.settings.tilt_rad[None])
-        return np.where(np.isfinite(lengths)[:, None], travel[:, None] + looks, np.inf)
+        return travel[:, None] + looks
 
     def _look_here(self, values: ActionValues, look_t: np.ndarray, covering: float, why: str) -> Decision:
         """Eq. 3: the look of largest E(f) = P_Ψ(f) / t(f) from where the robot stands."""

@@ -57,8 +57,10 @@ class TimeModel:
         slew = self.pantilt.slew_time_s(np.degrees(pan - pan_rad), np.degrees(np.asarray(tilts_rad) - tilt_rad))
         return self.base.turn_time_s(turn) + slew + self.image_s
 
-    def travel_s(self, path_length_m: float, turn_rad: float) -> float:
-        """Drive a path of this length after turning towards it."""
-        if not math.isfinite(path_length_m):
-            return math.inf
-        return self.base.turn_time_s(turn_rad) + self.base.drive_time_s(path_length_m)
+    def travel_s(self, path_length_m, turn_rad):
+        """Drive a path of this length after turning towards it; inf for no path (numbers or arrays)."""
+        length = np.asarray(path_length_m, np.float64)
+        reachable = np.isfinite(length)
+        t = self.base.turn_time_s(turn_rad) + self.base.drive_time_s(np.where(reachable, length, 0.0))
+        t = np.where(reachable, t, np.inf)
+        return float(t) if t.ndim == 0 else t
