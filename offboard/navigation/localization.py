@@ -12,9 +12,10 @@ room's walls (the room's extent is known, report §3.1):
    prediction's uncertainty), then a fine grid around the best coarse pose. The coarse grid's
    normalised likelihoods give the match's covariance, so a scan that sees a single wall is
    confident across the wall and not along it;
-3. **rejection**: too few points, too few of them on the map, a best pose on the window's edge along
-   a constrained direction, or (in :class:`PoseTracker`) a Mahalanobis distance to the prediction
-   beyond a χ² gate: a bad match never reaches the pose, nor (placed with it) the map;
+3. **rejection**: too few points, too few of them on the map, a likelihood that still rises at an
+   edge of the window (its optimum may lie beyond, and the grid's moments then describe the window,
+   not the match), or (in :class:`PoseTracker`) a Mahalanobis distance to the prediction beyond a χ²
+   gate: a bad match never reaches the pose, nor (placed with it) the map;
 4. **fusion**: :class:`PoseTracker` is an EKF over the world pose whose prediction is the odometry
    (its covariance grows with the distance driven and the angle turned); an accepted match is its
    measurement. The estimate is kept as an offset transform ``world_from_odom``, so any odometry pose
@@ -58,6 +59,7 @@ class MatchConfig:
     fine_xy_m: float = 0.01
     fine_theta_deg: float = 0.25
     min_inlier_fraction: float = 0.35  # points within 2σ of the map at the best pose
+    max_edge_imbalance: float = 0.75  # refused: one edge's marginal likelihood tops the other's by this share of its peak
     min_std_m: float = 0.02  # floor of the match's standard deviation (the grid's resolution)
     min_std_deg: float = 0.5
 
@@ -158,7 +160,8 @@ class ScanMatcher:
         coarse = _grid(half_xy, c.coarse_xy_m, half_deg, c.coarse_theta_deg)
         scores = _search(field, scan_xy, prior, *coarse)
         best = np.unravel_index(int(np.argmax(scores)), scores.shape)
-        covariance = self._covariance(scores, coarse, scan_xy.shape[0])
+        weights = self._weights(scores, scan_xy.shape[0])
+        covariance = self._covariance(weights, coarse)
         centre = _offset_pose(prior, coarse[0][best[0]], coarse[1][best[1]], coarse[2][best[2]])
         fine = _grid(c.coarse_xy_m, c.fine_xy_m, c.coarse_theta_deg, c.fine_theta_deg)  # one coarse cell round
         fine_scores = _search(field, scan_xy, centre, *fine)
@@ -168,8 +171,8 @@ class ScanMatcher:
         reason = ""
         if inliers < c.min_inlier_fraction:
             reason = f"only {inliers:.0%} of the points lie on the map"
-        elif self._on_edge(best, scores.shape, covariance, (half_xy, half_xy, math.radians(half_deg))):
-            reason = "the best pose lies on the edge of the search window"  # the true one may lie beyond
+        elif self._rises_to_edge(weights, c.max_edge_imbalance):
+            reason = "the likelihood rises toward an edge of the search window"  # the true pose may lie beyond
         return MatchResult(pose, covariance, inliers, int(scan_xy.shape[0]), not reason, reason)
 
     def _window(self, prior_covariance: np.ndarray | None) -> tuple[float, float]:
@@ -182,19 +185,28 @@ class ScanMatcher:
                 float(np.clip(3.0 * sdeg, c.search_theta_deg, c.max_search_theta_deg)))
 
     @staticmethod
-    def _on_edge(best: tuple, shape: tuple, covariance: np.ndarray, half: tuple[float, ...]) -> bool:
-        """A best pose on the window's edge along a direction the scan constrains: the true optimum may
-        lie beyond. (Along an unconstrained direction, e.g. a single wall, the edge means nothing.)"""
-        std = np.sqrt(np.diag(covariance))
-        return any(b in (0, n - 1) and s < 0.3 * h for b, n, s, h in zip(best, shape, std, half))
+    def _rises_to_edge(weights: np.ndarray, max_imbalance: float) -> bool:
+        """Does the likelihood, marginalised onto any one axis of the window, stay high at one edge
+        where it has fallen at the other? Then its optimum may lie beyond the window. The best pose
+        alone does not tell: a ridge or plateau running into the edge (a far patch of an unmapped
+        object slid onto a wall) peaks inside it. A likelihood flat across the window (along a single
+        wall) is as high at both edges: it constrains nothing there, and the match stands."""
+        for axis in range(weights.ndim):
+            marginal = weights.sum(axis=tuple(a for a in range(weights.ndim) if a != axis))
+            if abs(marginal[-1] - marginal[0]) > max_imbalance * marginal.max():
+                return True
+        return False
 
-    def _covariance(self, scores: np.ndarray, grid: tuple[np.ndarray, ...], n_points: int) -> np.ndarray:
-        """Olson's covariance: the search grid's poses weighted by their normalised likelihood,
-        tempered by the ratio of points to effectively independent ones."""
-        c = self.config
-        temper = max(n_points / c.evidence_points, 1.0)
+    def _weights(self, scores: np.ndarray, n_points: int) -> np.ndarray:
+        """The search grid's normalised likelihoods, tempered by the ratio of points to effectively
+        independent ones."""
+        temper = max(n_points / self.config.evidence_points, 1.0)
         w = np.exp((scores - scores.max()) / temper)
-        w /= w.sum()
+        return w / w.sum()
+
+    def _covariance(self, w: np.ndarray, grid: tuple[np.ndarray, ...]) -> np.ndarray:
+        """Olson's covariance: the search grid's poses weighted by their normalised likelihood."""
+        c = self.config
         dx, dy, dt = np.meshgrid(grid[0], grid[1], grid[2], indexing="ij")
         v = np.stack([dx.ravel(), dy.ravel(), dt.ravel()], axis=1)
         mean = w.ravel() @ v

@@ -173,3 +173,26 @@ def test_backing_off_is_not_a_half_turn():
     tracker = PoseTracker(Pose2D(1.0, 1.0, 0.0))
     tracker.predict(Pose2D(0.85, 1.0, 0.0))  # 0.15 m straight back
     assert math.degrees(math.sqrt(tracker.covariance[2, 2])) < 1.0
+
+
+def test_an_unmapped_object_is_not_slid_onto_a_wall():
+    """Early in a run the map holds the walls only. A far, compact patch of an object it does not
+    hold yet, 0.6 m in front of a wall and off to the side, fits that wall by turning the robot ~7°:
+    a ridge of good fits running into the window's heading edge, whose best pose lies just inside it.
+    The match is refused. The same patch seen on the wall itself is accepted, its covariance wide
+    enough along the ridge (the patch alone cannot tell) to hold the true pose."""
+    field = likelihood_field(np.zeros((180, 100), bool), RES)  # walls only
+    rng = np.random.default_rng(0)
+    pose = Pose2D(4.5, 2.5, 0.0)  # facing the east wall (x = 9), 4.5 m away
+    prior_covariance = np.diag([0.05 ** 2, 0.05 ** 2, math.radians(2.0) ** 2])
+
+    def patch(x_m: float) -> np.ndarray:  # 0.5 m wide, stereo-thick, 1.3 m to the left, robot frame
+        return np.stack([x_m + rng.uniform(-0.1, 0.1, 400), 1.3 + rng.uniform(0.0, 0.5, 400)], axis=1)
+
+    matcher = ScanMatcher()
+    unmapped = matcher.match(patch(3.9), pose, field, prior_covariance)
+    assert not unmapped.accepted and "edge" in unmapped.reason
+    on_wall = matcher.match(patch(4.5), pose, field, prior_covariance)
+    assert on_wall.accepted
+    error = np.array([on_wall.pose.x_m - pose.x_m, on_wall.pose.y_m - pose.y_m, on_wall.pose.heading_rad])
+    assert error @ np.linalg.solve(on_wall.covariance, error) < 11.3  # χ²(3) at 99 %
