@@ -43,6 +43,7 @@ class SensedSpheres:
     radius_m: np.ndarray  # (P, el_count, az_count): first obstacle or the detector's outer range
     inner_m: float
     outer_m: float
+    resolution_m: float  # of the map cast on: a ray stops where an occupied cube begins, up to this before its surface
 
 
 def sensed_spheres(occupancy: OccupancyGrid, centers_m: np.ndarray, bins: SphereBins, inner_m: float,
@@ -55,4 +56,4 @@ def sensed_spheres(occupancy: OccupancyGrid, centers_m: np.ndarray, bins: Sphere
     dirs = np.tile(axes, (centers.shape[0], 1))
     hits = occupancy.cast_rays(origins, dirs, outer_m, stop_at_unknown=unknown_is_opaque)
     radius = np.minimum(hits.distance_m, outer_m).reshape(centers.shape[0], bins.el_count, bins.az_count)
-    return SensedSpheres(bins, centers, radius, inner_m, outer_m)
+    return SensedSpheres(bins, centers, radius, inner_m, outer_m, occupancy.grid.resolution_m)
