@@ -213,6 +213,7 @@ _STATE_FIELDS = {
     "looks": lambda v: [LookTrace(**look) for look in v],
     "estimate_m": lambda v: None if v is None else np.array(v, np.float64),
     "taken": set,
+    "retaken": set,
 }
 
 

@@ -94,9 +94,25 @@ class SearchState:
     estimate_m: np.ndarray | None = None
     unreachable: list[tuple[float, float]] = field(default_factory=list)  # goals the navigator could not reach
     taken: set[int] = field(default_factory=set)  # settings looked at since the robot last moved
+    retaken: set[int] = field(default_factory=set)  # ... of those, the ones already looked at again to confirm
     motion_s: float = 0.0  # robot clock: driving, slewing, capture
     processing_s: float = 0.0  # wall clock: capture transfer, stereo, detection, mapping, update, planning
     look_log: list[dict] = field(default_factory=list)  # per look: expected and realised P, times
+
+    def took(self, setting: int, located: bool) -> None:
+        """Book a look at ``setting`` from where the robot stands: it is not taken again from here,
+        except once after a ``located`` detection (one with stereo depth), to confirm it. The same
+        image a third time says nothing new, and a weak far detection would be looked at for ever;
+        one without depth needs another view to place it."""
+        self.taken.add(setting)
+        if located and setting not in self.retaken:
+            self.taken.discard(setting)
+            self.retaken.add(setting)
+
+    def moved(self) -> None:
+        """Every setting is new again from a new position."""
+        self.taken.clear()
+        self.retaken.clear()
 
 
 class Search:
@@ -215,7 +231,7 @@ class Search:
         before = self.robot_time_s()
         result = self.navigator.go_to(goal)
         self.state.motion_s += self.robot_time_s() - before
-        self.state.taken.clear()
+        self.state.moved()
         self.state.distance_m += result.distance_m
         self.state.trail.append((result.pose.x_m, result.pose.y_m))
         if result.status == "reached":
@@ -239,10 +255,8 @@ class Search:
         name, (detector, table) = self._choose_detector(decision)
         obs = self.perception.observe(capture, self.tracker.world_pose(capture.pose.to_pose()), detector)
         self.state.actions += 1
-        self.state.taken.add(decision.setting)
         realised, found = self._interpret(obs, table)
-        if obs.target_m is not None:  # a located detection is worth confirming from the same view; one
-            self.state.taken.discard(decision.setting)  # without depth needs another view to place it
+        self.state.took(decision.setting, located=obs.target_m is not None)
         processing_s = self._pending_processing_s + time.perf_counter() - started  # the wall clock's part
         self._account(decision, obs, realised, motion_s, processing_s)
         self.state.looks.append(LookTrace(obs.pose.x_m, obs.pose.y_m, decision.azimuth_rad,
