@@ -11,7 +11,8 @@ room's walls (the room's extent is known, report §3.1):
    log-likelihood over a coarse (x, y, θ) grid around the predicted pose (the window widens with the
    prediction's uncertainty), then a fine grid around the best coarse pose. The coarse grid's
    normalised likelihoods give the match's covariance, so a scan that sees a single wall is
-   confident across the wall and not along it;
+   confident across the wall and not along it (where the likelihood stays high at both edges of the
+   window, the covariance says nothing at all, not the window's width);
 3. **rejection**: too few points, too few of them on the map, a likelihood that still rises at an
    edge of the window (its optimum may lie beyond, and the grid's moments then describe the window,
    not the match), or (in :class:`PoseTracker`) a Mahalanobis distance to the prediction beyond a χ²
@@ -38,6 +39,8 @@ from shared.geometry import HeadMount, Intrinsics, Pose2D, wrap_angle
 
 log = logging.getLogger(__name__)
 
+_NO_INFORMATION = 1e4  # variance (m², rad²) along an axis the match does not constrain
+
 
 @dataclass(frozen=True)
 class MatchConfig:
@@ -59,7 +62,8 @@ class MatchConfig:
     fine_xy_m: float = 0.01
     fine_theta_deg: float = 0.25
     min_inlier_fraction: float = 0.35  # points within 2σ of the map at the best pose
-    max_edge_imbalance: float = 0.75  # refused: one edge's marginal likelihood tops the other's by this share of its peak
+    max_edge_imbalance: float = 0.75  # refused: one edge's marginal likelihood tops the other's by this share
+    flat_edge: float = 0.5  # an axis whose marginal likelihood at both edges is this share of its peak: unconstrained
     min_std_m: float = 0.02  # floor of the match's standard deviation (the grid's resolution)
     min_std_deg: float = 0.5
 
@@ -161,7 +165,8 @@ class ScanMatcher:
         scores = _search(field, scan_xy, prior, *coarse)
         best = np.unravel_index(int(np.argmax(scores)), scores.shape)
         weights = self._weights(scores, scan_xy.shape[0])
-        covariance = self._covariance(weights, coarse)
+        edges = _edge_marginals(weights)
+        covariance = _uninformative_along(self._covariance(weights, coarse), edges.min(axis=1) >= c.flat_edge)
         centre = _offset_pose(prior, coarse[0][best[0]], coarse[1][best[1]], coarse[2][best[2]])
         fine = _grid(c.coarse_xy_m, c.fine_xy_m, c.coarse_theta_deg, c.fine_theta_deg)  # one coarse cell round
         fine_scores = _search(field, scan_xy, centre, *fine)
@@ -171,7 +176,7 @@ class ScanMatcher:
         reason = ""
         if inliers < c.min_inlier_fraction:
             reason = f"only {inliers:.0%} of the points lie on the map"
-        elif self._rises_to_edge(weights, c.max_edge_imbalance):
+        elif np.any(np.abs(edges[:, 1] - edges[:, 0]) > c.max_edge_imbalance):
             reason = "the likelihood rises toward an edge of the search window"  # the true pose may lie beyond
         return MatchResult(pose, covariance, inliers, int(scan_xy.shape[0]), not reason, reason)
 
@@ -183,19 +188,6 @@ class ScanMatcher:
         sdeg = math.degrees(math.sqrt(prior_covariance[2, 2]))
         return (float(np.clip(3.0 * sxy, c.search_xy_m, c.max_search_xy_m)),
                 float(np.clip(3.0 * sdeg, c.search_theta_deg, c.max_search_theta_deg)))
-
-    @staticmethod
-    def _rises_to_edge(weights: np.ndarray, max_imbalance: float) -> bool:
-        """Does the likelihood, marginalised onto any one axis of the window, stay high at one edge
-        where it has fallen at the other? Then its optimum may lie beyond the window. The best pose
-        alone does not tell: a ridge or plateau running into the edge (a far patch of an unmapped
-        object slid onto a wall) peaks inside it. A likelihood flat across the window (along a single
-        wall) is as high at both edges: it constrains nothing there, and the match stands."""
-        for axis in range(weights.ndim):
-            marginal = weights.sum(axis=tuple(a for a in range(weights.ndim) if a != axis))
-            if abs(marginal[-1] - marginal[0]) > max_imbalance * marginal.max():
-                return True
-        return False
 
     def _weights(self, scores: np.ndarray, n_points: int) -> np.ndarray:
         """The search grid's normalised likelihoods, tempered by the ratio of points to effectively
@@ -218,6 +210,28 @@ class ScanMatcher:
         w = self.config.hit_weight
         near = math.log(w * math.exp(-2.0) + 1.0 - w)  # log-likelihood at 2σ
         return float(np.mean(field.at(_to_world(scan_xy, pose)) >= near))
+
+
+def _edge_marginals(weights: np.ndarray) -> np.ndarray:
+    """(axes, 2): the likelihood marginalised onto each axis of the window, at its first and last
+    cell, over its peak. One edge high where the other has fallen: the optimum may lie beyond the
+    window (the best pose alone does not tell: a ridge running into the edge, such as a far patch of
+    an unmapped object slid onto a wall, peaks inside it). Both edges high: the scan does not
+    constrain that axis (along a single wall), and the best pose along it is arbitrary."""
+    out = np.empty((weights.ndim, 2))
+    for axis in range(weights.ndim):
+        marginal = weights.sum(axis=tuple(a for a in range(weights.ndim) if a != axis))
+        out[axis] = marginal[0] / marginal.max(), marginal[-1] / marginal.max()
+    return out
+
+
+def _uninformative_along(covariance: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """The covariance with no information along ``axes``: there the grid's spread is the window's
+    width, not the match's, and the fusion must not pull toward an arbitrary best pose."""
+    out = covariance.copy()
+    out[axes, :] = out[:, axes] = 0.0
+    out[axes, axes] = _NO_INFORMATION
+    return out
 
 
 def _grid(half_xy: float, step_xy: float, half_deg: float, step_deg: float) -> tuple[np.ndarray, ...]:

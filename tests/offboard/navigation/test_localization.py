@@ -72,13 +72,19 @@ def test_a_displaced_scan_is_pulled_back_onto_the_map(true_pose, offset):
 
 
 def test_a_single_wall_constrains_only_across_it():
+    """Along the wall every pose of the window fits as well: the best one there is arbitrary, and
+    the fused pose must not be pulled toward it."""
     field = likelihood_field(np.zeros((180, 100), bool), RES)  # walls only
     true_pose = Pose2D(4.5, 3.5, math.pi / 2)  # facing the north wall, 1.5 m away
     scan = camera_scan(true_pose, np.random.default_rng(1), fov_deg=40.0)
-    result = ScanMatcher().match(scan, Pose2D(4.6, 3.6, math.pi / 2), field)
+    prior = Pose2D(4.6, 3.6, math.pi / 2)
+    result = ScanMatcher().match(scan, prior, field)
     assert result.accepted and abs(result.pose.y_m - 3.5) < 0.03
     sx, sy = np.sqrt(np.diag(result.covariance))[:2]
     assert sx > 3 * sy  # along the wall, the scan says little
+    tracker = PoseTracker(prior, covariance=np.diag([0.1 ** 2, 0.1 ** 2, math.radians(2.0) ** 2]))
+    assert tracker.correct(prior, result.pose, result.covariance)
+    assert tracker.pose.x_m == pytest.approx(4.6, abs=0.005) and tracker.pose.y_m == pytest.approx(3.5, abs=0.01)
 
 
 def test_too_few_points_or_points_off_the_map_are_not_accepted():
