@@ -137,8 +137,18 @@ class GeometryCache:
         return ActionGeometry.stack(parts)
 
 
+def heavy_blocks(belief: TargetBelief, share: float = 1e-3, most: int = 64) -> np.ndarray:
+    """The blocks holding at least ``share`` of the target probability each (at most ``most``, the
+    heaviest): after a detection, where the belief has gathered. Whether a look sees them decides
+    what it is worth, so :func:`evaluate` judges their occlusion along the exact ray to them, not
+    along the axis of their sphere bin (7.5° wide: its axis may hit the shelf the target stands on)."""
+    mass = belief.coarse_mass().reshape(-1, belief.facing_sectors).sum(axis=1)
+    order = np.argsort(-mass)[:most]
+    return order[mass[order] >= share]
+
+
 def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSpheres,
-             behind_surface_m: float = 0.0) -> ActionValues:
+             behind_surface_m: float = 0.0, heavy: np.ndarray | None = None) -> ActionValues:
     """Expected detection probability of every (position, setting), covering probability of every
     position; ``spheres`` are the positions' sensed spheres, in the geometry's order. A block counts
     up to half a block plus ``behind_surface_m`` beyond its direction's sphere radius (the target's
@@ -146,12 +156,17 @@ def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSphe
     counts it), plus the cube size of the map the spheres were cast on: its occupied cubes begin up
     to that much before the surface the real look's stereo depth will see. Without it the planner
     underestimated its looks at a target already detected once (expected 0.39 against 0.51 realised
-    on the dev suite), whose mass sits just behind the surface."""
+    on the dev suite), whose mass sits just behind the surface. ``heavy`` (T,): blocks whose
+    occlusion is read from ``spheres.toward_m`` (cast toward their centres, in that order) instead."""
     mass = np.ascontiguousarray(belief.coarse_mass().reshape(-1, belief.facing_sectors))
     radius = spheres.radius_m.reshape(len(geometry.positions_m), -1)
+    slot = np.full(len(mass), -1, np.int32)
+    if heavy is not None:
+        slot[np.asarray(heavy, np.int64)] = np.arange(len(heavy), dtype=np.int32)
     rate = np.ascontiguousarray(geometry.table.rate)
     detection, covering = _score(mass, geometry.distance_m, geometry.sphere_bin, geometry.distance_bin,
                                  geometry.facing_bin, geometry.off_axis_bin, np.ascontiguousarray(radius),
+                                 slot, np.ascontiguousarray(spheres.toward_m, np.float64),
                                  geometry.block_margin_m + behind_surface_m + spheres.resolution_m, rate)
     return ActionValues(detection, covering)
 
@@ -198,7 +213,7 @@ def _geometry(centers, positions, geometry, n_el, n_az, rotations, d_edges, o_ed
 
 
 @numba.njit(cache=True, parallel=True)
-def _score(mass, distance, sphere_bin, distance_bin, facing_bin, off_axis_bin, radius, margin, rate):
+def _score(mass, distance, sphere_bin, distance_bin, facing_bin, off_axis_bin, radius, slot, toward, margin, rate):
     n_pos, n_blk = distance.shape
     n_set, n_fac = off_axis_bin.shape[2], mass.shape[1]
     detection = np.zeros((n_pos, n_set))
@@ -207,8 +222,11 @@ def _score(mass, distance, sphere_bin, distance_bin, facing_bin, off_axis_bin, r
     for p in numba.prange(n_pos):
         for c in range(n_blk):
             sb, db = sphere_bin[p, c], distance_bin[p, c]
-            if sb < 0 or db < 0 or distance[p, c] > radius[p, sb] + margin:
-                continue  # out of reach, or behind the first obstacle in that direction
+            if sb < 0 or db < 0:
+                continue  # out of reach
+            reach = radius[p, sb] if slot[c] < 0 else toward[p, slot[c]]
+            if distance[p, c] > reach + margin:
+                continue  # behind the first obstacle in that direction
             best[p, :] = 0.0
             for a in range(n_set):
                 ob = off_axis_bin[p, c, a]

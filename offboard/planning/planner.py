@@ -37,7 +37,8 @@ import numpy as np
 
 from offboard.perception.detectability import DetectabilityTable
 from offboard.perception.occupancy import FloorMap, OccupancyGrid
-from offboard.planning.action_values import ActionGeometry, ActionValues, CameraSettings, GeometryCache, block_centers, evaluate
+from offboard.planning.action_values import (ActionGeometry, ActionValues, CameraSettings, GeometryCache, block_centers,
+                                             evaluate, heavy_blocks)
 from offboard.planning.belief import TargetBelief
 from offboard.planning.sensed_sphere import SphereBins, sensed_spheres
 from offboard.planning.time_model import TimeModel
@@ -208,10 +209,12 @@ class SearchPlanner:
                                                                           self.intrinsics, self.table, self.bins))
         factor = max(1, round(self.config.sphere_resolution_m / occupancy.grid.resolution_m))
         coarse = occupancy.coarsened(factor)
+        heavy = heavy_blocks(self.belief)
         rows = []
         for geometry in geometries:
-            spheres = sensed_spheres(coarse, geometry.centers_m, self.bins, near, far, self.config.unknown_is_opaque)
-            rows.append(evaluate(geometry, self.belief, spheres, self.config.behind_surface_m))
+            spheres = sensed_spheres(coarse, geometry.centers_m, self.bins, near, far, self.config.unknown_is_opaque,
+                                     self._blocks_m[heavy])
+            rows.append(evaluate(geometry, self.belief, spheres, self.config.behind_surface_m, heavy))
         return ActionValues(np.vstack([r.detection_prob for r in rows]),
                             np.concatenate([r.covering_prob for r in rows]))
 

@@ -44,16 +44,31 @@ class SensedSpheres:
     inner_m: float
     outer_m: float
     resolution_m: float  # of the map cast on: a ray stops where an occupied cube begins, up to this before its surface
+    toward_m: np.ndarray  # (P, T): radius along the exact direction to each of T given points (see sensed_spheres)
 
 
 def sensed_spheres(occupancy: OccupancyGrid, centers_m: np.ndarray, bins: SphereBins, inner_m: float,
-                   outer_m: float, unknown_is_opaque: bool = False) -> SensedSpheres:
+                   outer_m: float, unknown_is_opaque: bool = False, toward_m: np.ndarray | None = None) -> SensedSpheres:
     """Ray-cast every bin's axis from every centre on the occupancy map (pass a
-    :meth:`~OccupancyGrid.coarsened` map: a radius to within a block is plenty for planning)."""
+    :meth:`~OccupancyGrid.coarsened` map: a radius to within a block is plenty for planning), and
+    the exact direction to each point of ``toward_m`` (T, 3): a bin's axis can graze an obstacle
+    that the rays to a small, heavily weighted place pass by."""
     centers = np.atleast_2d(np.asarray(centers_m, np.float64))
     axes = bins.axes().reshape(-1, 3)
-    origins = np.repeat(centers, axes.shape[0], axis=0)
-    dirs = np.tile(axes, (centers.shape[0], 1))
-    hits = occupancy.cast_rays(origins, dirs, outer_m, stop_at_unknown=unknown_is_opaque)
-    radius = np.minimum(hits.distance_m, outer_m).reshape(centers.shape[0], bins.el_count, bins.az_count)
-    return SensedSpheres(bins, centers, radius, inner_m, outer_m, occupancy.grid.resolution_m)
+    radius = _cast(occupancy, np.repeat(centers, len(axes), axis=0), np.tile(axes, (len(centers), 1)), outer_m,
+                   unknown_is_opaque).reshape(len(centers), bins.el_count, bins.az_count)
+    points = np.zeros((0, 3)) if toward_m is None else np.atleast_2d(np.asarray(toward_m, np.float64))
+    toward = np.zeros((len(centers), 0))
+    if len(points):
+        offsets = (points[None, :, :] - centers[:, None, :]).reshape(-1, 3)
+        offsets[np.all(offsets == 0, axis=1)] = (1.0, 0.0, 0.0)  # a point at the centre: any direction will do
+        toward = _cast(occupancy, np.repeat(centers, len(points), axis=0), offsets, outer_m,
+                       unknown_is_opaque).reshape(len(centers), len(points))
+    return SensedSpheres(bins, centers, radius, inner_m, outer_m, occupancy.grid.resolution_m, toward)
+
+
+def _cast(occupancy: OccupancyGrid, origins: np.ndarray, directions: np.ndarray, outer_m: float,
+          unknown_is_opaque: bool) -> np.ndarray:
+    """Distance to the first obstacle from each origin along its direction, capped at ``outer_m``."""
+    hits = occupancy.cast_rays(origins, directions, outer_m, stop_at_unknown=unknown_is_opaque)
+    return np.minimum(hits.distance_m, outer_m)

@@ -190,3 +190,17 @@ def test_planned_positions_add_viewpoints_the_base_can_stand_on():
     assert np.hypot(*(aimed[0] - box_center)) < 1.0  # the strongest faces the box
     d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))
     assert d.kind == "move" and np.hypot(*(np.array(d.position_m) - box_center)) < 1.6
+
+
+def test_where_the_belief_has_gathered_occlusion_is_judged_along_the_ray_to_it():
+    """A thin post stands on the axis of the sphere bin that holds a heavily weighted place, but off
+    the straight line to it: the look at it is worth what it finds, not nothing."""
+    target = HintBox((3.45, 1.9, 1.15), (3.55, 2.0, 1.25), 0.9)
+    occ = OccupancyGrid(ROOM)
+    post = ROOM.box_slices(np.array([2.45, 1.8, 0.8]), np.array([2.55, 1.9, 1.6]))  # just beside the line
+    occ.log_odds[post] = 5.0
+    occ.observed[:] = True
+    pose = Pose2D(1.0, 1.95, 0.0)
+    planner = _planner(3, boxes=(target,), table=DetectabilityTable.nominal())
+    best = planner.decide(pose, 0.0, 0.0, 0.0, occ, _paths(planner, pose)).values.detection_prob[-1].max()
+    assert best > 0.6
