@@ -16,7 +16,7 @@ demo: $(STAMP)
 	$(VENV)/bin/syt-offboard demo --out demo-out
 
 test: $(STAMP)
-	$(PY) -m pytest -q --durations=10
+	$(PY) -m pytest -q -n 2 --durations=10
 
 bench: $(STAMP)
 	$(VENV)/bin/syt-onboard bench --json
