@@ -47,8 +47,8 @@ class SensedSpheres:
     toward_m: np.ndarray  # (P, T): radius along the exact direction to each of T given points (see sensed_spheres)
 
 
-def sensed_spheres(occupancy: OccupancyGrid, centers_m: np.ndarray, bins: SphereBins, inner_m: float,
-                   outer_m: float, unknown_is_opaque: bool = False, toward_m: np.ndarray | None = None) -> SensedSpheres:
+def sensed_spheres(occupancy: OccupancyGrid, centers_m: np.ndarray, bins: SphereBins, inner_m: float, outer_m: float,
+                   unknown_is_opaque: bool = False, toward_m: np.ndarray | None = None) -> SensedSpheres:
     """Ray-cast every bin's axis from every centre on the occupancy map (pass a
     :meth:`~OccupancyGrid.coarsened` map: a radius to within a block is plenty for planning), and
     the exact direction to each point of ``toward_m`` (T, 3): a bin's axis can graze an obstacle
