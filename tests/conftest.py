@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -17,6 +18,16 @@ from offboard.robot.robot_client import RobotClient
 from shared.transport import TransportConfig
 
 RES = 0.05  # the floor maps' cell size in the navigation tests
+
+
+def wait_until(predicate, timeout_s: float, poll_s: float = 0.02) -> bool:
+    """Poll ``predicate`` until it holds (True) or ``timeout_s`` has passed (False)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(poll_s)
+    return False
 
 
 def client_transport(agent: LoopbackAgent, robot_id: str = "syt") -> TransportConfig:

@@ -10,6 +10,7 @@ import threading
 import time
 
 import pytest
+from conftest import wait_until
 
 from onboard.agent import Agent
 from onboard.backends import build_robot
@@ -40,15 +41,6 @@ def _ask(session, key: str, command, expected):
         return "unavailable"
 
 
-def _until(predicate, timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.05)
-    return False
-
-
 def test_a_dropped_serial_link_is_a_device_error_then_the_agent_serves_again():
     world = load_world("paper-lab")
     keys = RobotKeys("hw")
@@ -68,17 +60,17 @@ def test_a_dropped_serial_link_is_a_device_error_then_the_agent_serves_again():
                 published: list[float] = []
                 session.declare_subscriber(keys.odometry, lambda _: published.append(time.monotonic()))
                 state = lambda: _ask(session, keys.state, m.StateRequest(next(_ids)), m.StateReply)  # noqa: E731
-                assert _until(lambda: isinstance(state(), m.StateReply), 10.0)
+                assert wait_until(lambda: isinstance(state(), m.StateReply), 10.0)
 
                 emulated.pioneer.unplug()
-                assert _until(lambda: state() == "device", 3.0)
+                assert wait_until(lambda: state() == "device", 3.0)
                 move = m.MoveCommand(next(_ids), distance_m=0.5)
                 assert _ask(session, keys.move, move, m.MoveResult) == "device"
                 quiet_since = time.monotonic()
 
                 emulated.pioneer.plug()
-                assert _until(lambda: isinstance(state(), m.StateReply), 5.0)
-                assert _until(lambda: any(t > quiet_since for t in published), 2.0)  # publishing resumed
+                assert wait_until(lambda: isinstance(state(), m.StateReply), 5.0)
+                assert wait_until(lambda: any(t > quiet_since for t in published), 2.0)  # publishing resumed
                 moved = _ask(session, keys.move, m.MoveCommand(next(_ids), distance_m=0.2), m.MoveResult)
                 assert moved.status == "done" and moved.distance_m == pytest.approx(0.2, abs=0.03)
         finally:

@@ -10,6 +10,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 import serial
+from conftest import wait_until
 
 from onboard.devices import MotionOutcome
 from onboard.emulators.pioneer import PioneerEmulator, PioneerEmulatorConfig, PioneerServerState
@@ -26,15 +27,6 @@ pytestmark = pytest.mark.integration  # real time over a pseudo-terminal: second
 
 LIMITS = BaseLimits(default_turn_rate_deg_s=120.0, turn_accel_deg_s2=300.0)  # brisk turns keep the tests short
 FAST_LINK = dict(link_timeout_ms=300, reconnect_period_ms=100, sync_reply_timeout_ms=200, stale_session_wait_ms=100)
-
-
-def wait_until(predicate, timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return False
 
 
 @pytest.fixture

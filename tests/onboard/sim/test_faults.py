@@ -8,7 +8,7 @@ import time
 
 import pytest
 import zenoh
-from conftest import running_agent
+from conftest import running_agent, wait_until
 
 from offboard.robot.robot_client import CommandError
 from shared import messages as m
@@ -52,7 +52,7 @@ def test_a_failing_head_or_camera_is_answered_and_the_base_stops(tmp_path, box_w
         results = []
         mover = threading.Thread(target=lambda: results.append(robot.move(distance_m=4.0, speed_m_s=0.3)))
         mover.start()
-        _wait_until(lambda: robot.state().base_moving)
+        assert wait_until(lambda: robot.state().base_moving, 5.0)
         _inject(robot, "pantilt", after_s=0.1)
         with pytest.raises(CommandError) as err:
             robot.look(40.0, 0.0)
@@ -73,10 +73,3 @@ def test_a_fault_for_an_unknown_device_is_refused_naming_the_field(sim_agent):
     with pytest.raises(CommandError) as err:
         _inject(robot, "gripper")
     assert err.value.code == "protocol" and "device" in str(err.value)
-
-
-def _wait_until(predicate, timeout_s: float = 5.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        assert time.monotonic() < deadline, "condition not reached in time"
-        time.sleep(0.01)
