@@ -118,31 +118,44 @@ def judge(target: FuzzTarget, case: Case) -> tuple[str, str | None]:
     return "accepted", None
 
 
-def run_target(target: FuzzTarget, cases: int) -> FuzzReport:
-    """Run at least ``cases`` generated cases through ``target``; never stops at a failure."""
+def for_each_generated(strategy: Any, count: int, each: Callable[[Any], None]) -> None:
+    """Call ``each`` on at least ``count`` values that hypothesis generates from ``strategy``
+    (generation only, no shrinking), drawn ``BATCH`` at a time."""
     require_hypothesis()
     from hypothesis import HealthCheck, Phase, given, settings
     from hypothesis import strategies as st
 
+    done = 0
+
+    @settings(max_examples=-(-count // BATCH), deadline=None, database=None, phases=[Phase.generate],
+              suppress_health_check=list(HealthCheck))
+    @given(st.lists(strategy, min_size=BATCH, max_size=BATCH))
+    def run(batch: list) -> None:
+        nonlocal done
+        for value in batch:
+            each(value)
+        done += len(batch)
+
+    while done < count:  # a strategy with few distinct values may stop early: go again
+        run()
+
+
+def run_target(target: FuzzTarget, cases: int) -> FuzzReport:
+    """Run at least ``cases`` generated cases through ``target``; never stops at a failure."""
     report = FuzzReport(target.name)
     started = time.perf_counter()
 
-    @settings(max_examples=-(-cases // BATCH), deadline=None, database=None, phases=[Phase.generate],
-              suppress_health_check=list(HealthCheck))
-    @given(st.lists(target.cases(), min_size=BATCH, max_size=BATCH))
-    def run(batch: list[Case]) -> None:
-        for case in batch:
-            report.cases += 1
-            outcome, problem = judge(target, case)
-            report.refused += outcome == "refused"
-            report.accepted += outcome == "accepted"
-            if problem is not None:
-                report.failures += 1
-                if len(report.examples) < EXAMPLES_KEPT:
-                    report.examples.append(f"{problem} [input: {_shown(case.data)}]")
+    def run(case: Case) -> None:
+        report.cases += 1
+        outcome, problem = judge(target, case)
+        report.refused += outcome == "refused"
+        report.accepted += outcome == "accepted"
+        if problem is not None:
+            report.failures += 1
+            if len(report.examples) < EXAMPLES_KEPT:
+                report.examples.append(f"{problem} [input: {_shown(case.data)}]")
 
-    while report.cases < cases:  # a strategy with few distinct cases may stop early: go again
-        run()
+    for_each_generated(target.cases(), cases, run)
     report.seconds = round(time.perf_counter() - started, 2)
     return report
 

@@ -25,7 +25,7 @@ import zenoh
 from shared import messages as m
 from shared.codec import ProtocolError, decode, encode
 from shared.fuzz_targets import message_cases
-from shared.fuzzing import BATCH, Case, names_field
+from shared.fuzzing import Case, for_each_generated, names_field
 from shared.keys import RobotKeys
 from shared.rpc import request
 
@@ -79,7 +79,6 @@ class LiveReport:
 
 def live_queries(count: int, info: m.Info) -> list[LiveQuery]:
     """``count`` queries: malformed payloads for every queryable, and commands outside ``info``'s limits."""
-    from hypothesis import HealthCheck, Phase, given, settings
     from hypothesis import strategies as st
 
     leaves = [q for q in QUERYABLES if info.backend == "sim" or not q.startswith("sim_")]
@@ -98,15 +97,7 @@ def live_queries(count: int, info: m.Info) -> list[LiveQuery]:
         return LiveQuery(leaf, encode(command), "limit", Case(command, None, True, f"outside the limits: {command}"))
 
     found: list[LiveQuery] = []
-
-    @settings(max_examples=-(-count // BATCH), deadline=None, database=None, phases=[Phase.generate],
-              suppress_health_check=list(HealthCheck))
-    @given(st.lists(queries(), min_size=BATCH, max_size=BATCH))
-    def collect(batch: list[LiveQuery]) -> None:
-        found.extend(batch)
-
-    while len(found) < count:
-        collect()
+    for_each_generated(queries(), count, found.append)
     return found[:count]
 
 
