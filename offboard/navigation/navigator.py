@@ -82,6 +82,7 @@ class NavigationResult:
     odometry: Pose2D  # the robot's own odometry pose at the end
     distance_m: float  # driven (back-offs included)
     robot_time_s: float  # robot clock from start to end
+    processing_s: float  # wall clock not spent waiting for the robot: stereo, localisation, mapping, routing
     steps: int
     stalls: int
     matches_accepted: int  # scan matches fused into the pose during the run
@@ -94,6 +95,8 @@ class _Run:
     start_time_s: float
     last_time_s: float
     matches: tuple[int, int]  # accepted, tried before the run
+    wall_start_s: float  # wall clock at the start, and time spent waiting for the robot before it
+    waiting_start_s: float
     distance_m: float = 0.0
     steps: int = 0
     stalls: int = 0
@@ -111,18 +114,26 @@ class Navigator:
             raise ValueError("floor maps are indexed from the world origin: the grid must start at x = y = 0")
         self.robot, self.occupancy, self.config = robot, occupancy, config
         info = robot.info()
-        self._base, self._pantilt = info.base, info.pantilt
+        self._base, self._pantilt, self._capture_s = info.base, info.pantilt, info.camera.capture_s
         self._intrinsics, self._mount = info.intrinsics.to_intrinsics(), info.mount.to_mount()
         self._odom = robot.state().pose.to_pose()
         self.tracker = tracker if tracker is not None else PoseTracker(self._odom)
         self._stereo = StereoMatcher()
         self._matcher = ScanMatcher(config.match)
         self.matches_tried = self.matches_accepted = 0
+        self.waiting_s = 0.0  # wall clock spent in robot commands: the rest of a run is processing
 
     @property
     def pose(self) -> Pose2D:
         """Corrected world pose of the robot at its last known odometry."""
         return self.tracker.world_pose(self._odom)
+
+    def nominal_s_per_m(self) -> float:
+        """Robot time per metre of a run without stalls or surveys: each step drives ``bug.step_m``
+        from rest to rest after one capture toward the motion (the planner's travel time until runs
+        have been measured)."""
+        step = self.config.bug.step_m
+        return (float(self._base.drive_time_s(step)) + self._capture_s) / step
 
     def floor_map(self) -> FloorMap:
         return self.occupancy.floor_map(self._base.radius_m + self.config.margin_m, self._base.height_m)
@@ -133,8 +144,8 @@ class Navigator:
         """Look, capture, localise against the map so far, then add the frame to the map; robot time."""
         tilt = self.config.look_tilt_deg if tilt_deg is None else tilt_deg
         pan = float(np.clip(pan_deg, self._pantilt.pan_min_deg, self._pantilt.pan_max_deg))
-        retry_busy(self.robot.look, pan, tilt)
-        capture = retry_busy(self.robot.capture)
+        self._command(self.robot.look, pan, tilt)
+        capture = self._command(self.robot.capture)
         disparity = self._stereo.disparity(capture.left, capture.right)
         self._odom = capture.pose.to_pose()
         pan_rad, tilt_rad = math.radians(capture.pan_deg), math.radians(capture.tilt_deg)
@@ -167,7 +178,8 @@ class Navigator:
         state = self.robot.state()  # the robot may have been turned or moved since the last call
         self._odom = state.pose.to_pose()
         self.tracker.predict(self._odom)
-        run = _Run(goal, state.robot_time_s, state.robot_time_s, (self.matches_accepted, self.matches_tried))
+        run = _Run(goal, state.robot_time_s, state.robot_time_s, (self.matches_accepted, self.matches_tried),
+                   time.perf_counter(), self.waiting_s)
         bug = TangentBug(goal, self.config.bug)
         while True:
             verdict = self._verdict(run)
@@ -286,13 +298,21 @@ class Navigator:
         cell = nearest_free_cell(floor, goal)
         return None if cell is None else cell_center(floor, cell)
 
+    def _command(self, command: Callable[..., T], *args: float) -> T:
+        """A robot command (:func:`retry_busy`), its wall time booked as waiting, not processing."""
+        started = time.perf_counter()
+        try:
+            return retry_busy(command, *args)
+        finally:
+            self.waiting_s += time.perf_counter() - started
+
     def _pan_toward(self, point: Point) -> float:
         pose = self.pose
         return math.degrees(pose.bearing_to(*point))
 
     def _drive(self, run: _Run, waypoint: Point) -> None:
         odom_goal = self.tracker.odom_point(waypoint)
-        result = retry_busy(self.robot.move_to, *odom_goal)
+        result = self._command(self.robot.move_to, *odom_goal)
         run.steps += 1
         run.distance_m += result.distance_m
         run.last_time_s = result.robot_time_s
@@ -308,7 +328,7 @@ class Navigator:
         log.info("stalled at (%.2f, %.2f) heading %.0f°: marking the obstacle ahead", pose.x_m, pose.y_m,
                  math.degrees(pose.heading_rad))
         self._mark_contact(pose)
-        back = retry_busy(self.robot.move, 0.0, -self.config.backoff_m)
+        back = self._command(self.robot.move, 0.0, -self.config.backoff_m)
         run.distance_m += back.distance_m
         run.last_time_s = back.robot_time_s
         self._odom = back.pose.to_pose()
@@ -330,8 +350,9 @@ class Navigator:
     def _result(self, run: _Run, status: Status, reason: str) -> NavigationResult:
         log.info("navigation to (%.2f, %.2f): %s (%s) after %d steps, %.2f m", *run.goal, status, reason,
                  run.steps, run.distance_m)
+        processing_s = time.perf_counter() - run.wall_start_s - (self.waiting_s - run.waiting_start_s)
         return NavigationResult(status, reason, self.pose, self._odom, run.distance_m,
-                                run.last_time_s - run.start_time_s, run.steps, run.stalls,
+                                run.last_time_s - run.start_time_s, processing_s, run.steps, run.stalls,
                                 self.matches_accepted - run.matches[0], self.matches_tried - run.matches[1])
 
 

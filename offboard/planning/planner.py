@@ -125,6 +125,10 @@ class SearchPlanner:
         planning): part of every t(f) from now on."""
         self.time_model = replace(self.time_model, processing_s=seconds)
 
+    def set_drive_s_per_m(self, seconds: float) -> None:
+        """The navigator's measured robot time per metre driven: part of every travel time from now on."""
+        self.time_model = replace(self.time_model, drive_s_per_m=seconds)
+
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float,
                occupancy: OccupancyGrid, path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
         """The next action from ``pose`` (pan-tilt at ``pan_rad``, ``tilt_rad``), ``elapsed_s`` into the

@@ -2,7 +2,8 @@
 
 An action moves the sensor (travel along the navigation path, turning, slewing the pan-tilt unit),
 takes an image, and analyses it. Travel is costed along the path the navigator would drive, not
-the straight line.
+the straight line, at the rate the navigator is measured to drive it: it moves in short steps from
+rest to rest and looks ahead before each, so a metre takes several times a straight drive's time.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ class TimeModel:
     pantilt: PanTiltLimits
     camera: CameraTiming
     processing_s: float = 0.5  # stereo, detection, map and belief update, planning (measured at run time)
+    drive_s_per_m: float = 0.0  # robot time per metre of navigation (measured at run time); 0: one straight drive
 
     @property
     def image_s(self) -> float:
@@ -61,6 +63,8 @@ class TimeModel:
         """Drive a path of this length after turning towards it; inf for no path (numbers or arrays)."""
         length = np.asarray(path_length_m, np.float64)
         reachable = np.isfinite(length)
-        t = self.base.turn_time_s(turn_rad) + self.base.drive_time_s(np.where(reachable, length, 0.0))
+        length = np.where(reachable, length, 0.0)
+        drive = length * self.drive_s_per_m if self.drive_s_per_m > 0 else self.base.drive_time_s(length)
+        t = self.base.turn_time_s(turn_rad) + drive
         t = np.where(reachable, t, np.inf)
         return float(t) if t.ndim == 0 else t

@@ -47,6 +47,7 @@ from shared.geometry import Pose2D
 from shared.strict import bounds
 
 log = logging.getLogger(__name__)
+_NOMINAL_DRIVE_M = 2.0  # the weight of the nominal driving rate: one short run moves the estimate halfway
 
 
 @dataclass(frozen=True)
@@ -97,6 +98,7 @@ class SearchState:
     retaken: set[int] = field(default_factory=set)  # ... of those, the ones already looked at again to confirm
     motion_s: float = 0.0  # robot clock: driving, slewing, capture
     processing_s: float = 0.0  # wall clock: capture transfer, stereo, detection, mapping, update, planning
+    driving_s: float = 0.0  # moves between positions, both clocks: driving, and the looks and processing on the way
     look_log: list[dict] = field(default_factory=list)  # per look: expected and realised P, times
 
     def took(self, setting: int, located: bool) -> None:
@@ -145,6 +147,7 @@ class Search:
         self.tracker = PoseTracker(start.pose.to_pose())
         self.navigator = Navigator(robot, self.occupancy, self.tracker)
         self.state = SearchState()
+        self.measure_driving()
         self.last_footprint = None
         self._pan_tilt = (math.radians(start.pan_deg), math.radians(start.tilt_deg))
         self._plans_positions = policy is None  # baselines keep the report's fixed grid
@@ -230,9 +233,13 @@ class Search:
         goal = decision.position_m
         before = self.robot_time_s()
         result = self.navigator.go_to(goal)
-        self.state.motion_s += self.robot_time_s() - before
+        motion_s = self.robot_time_s() - before
+        self.state.motion_s += motion_s
+        self.state.processing_s += result.processing_s
+        self.state.driving_s += motion_s + result.processing_s
         self.state.moved()
         self.state.distance_m += result.distance_m
+        self.measure_driving()
         self.state.trail.append((result.pose.x_m, result.pose.y_m))
         if result.status == "reached":
             self.state.positions.append((result.pose.x_m, result.pose.y_m))
@@ -240,6 +247,13 @@ class Search:
         else:
             self.state.unreachable.append(tuple(goal))
             log.warning("position (%.1f, %.1f) not reached: %s (%s)", goal[0], goal[1], result.status, result.reason)
+
+    def measure_driving(self) -> None:
+        """Give the planner the navigator's robot time per metre as measured so far, starting from
+        its nominal rate, which counts as ``_NOMINAL_DRIVE_M`` metres driven."""
+        s = self.state
+        nominal = self.navigator.nominal_s_per_m()
+        self.planner.set_drive_s_per_m((nominal * _NOMINAL_DRIVE_M + s.driving_s) / (_NOMINAL_DRIVE_M + s.distance_m))
 
     def _look(self, decision: Decision) -> None:
         pose = self._pose()
@@ -269,17 +283,17 @@ class Search:
 
     def _account(self, decision: Decision, obs: Observation, realised: float, motion_s: float,
                  processing_s: float) -> None:
-        """Book the look's times (the planner's t(f) takes the mean processing from now on) and log
-        what the planner expected of it beside what the exact update found."""
+        """Book the look's times (the planner's t(f) takes the mean processing of a look from now on)
+        and log what the planner expected of it beside what the exact update found."""
         s = self.state
         s.motion_s += motion_s
         s.processing_s += processing_s
         self._pending_processing_s = 0.0
-        self.planner.set_processing_s(s.processing_s / s.actions)
         s.look_log.append({"action": s.actions, "expected_p": round(float(decision.detection_prob), 6),
                            "realised_p": round(float(realised), 6), "detected": obs.detection is not None,
                            "processing_s": round(processing_s, 4), "motion_s": round(motion_s, 4),
                            "x_m": round(obs.pose.x_m, 3), "y_m": round(obs.pose.y_m, 3), "setting": decision.setting})
+        self.planner.set_processing_s(float(np.mean([look["processing_s"] for look in s.look_log])))
 
     def _interpret(self, obs: Observation, table: DetectabilityTable) -> tuple[float, bool]:
         """Bayes on what the look saw: eq. 4 after a miss, the detection model after a detection.

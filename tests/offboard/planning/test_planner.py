@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -204,3 +205,18 @@ def test_where_the_belief_has_gathered_occlusion_is_judged_along_the_ray_to_it()
     planner = _planner(3, boxes=(target,), table=DetectabilityTable.nominal())
     best = planner.decide(pose, 0.0, 0.0, 0.0, occ, _paths(planner, pose)).values.detection_prob[-1].max()
     assert best > 0.6
+
+
+def test_travel_is_costed_at_the_navigators_measured_rate():
+    # some mass in view here, more 1 m away: a straight drive makes the visit worth it, the rate the
+    # navigator really drives at (steps from rest, a look before each) does not
+    boxes = (HintBox((1.9, 2.4, 1.1), (2.1, 2.6, 1.3), 0.1), HintBox((3.4, 2.4, 1.1), (3.6, 2.6, 1.3), 0.9))
+    pose = Pose2D(2.0, 1.5, math.pi / 2)
+    decisions = {}
+    for rate in (0.0, 15.0):
+        planner = _planner(3, boxes=boxes)
+        planner.set_drive_s_per_m(rate)
+        decisions[rate] = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose))
+    assert decisions[0.0].kind == "move", decisions[0.0].reason
+    assert decisions[15.0].kind == "look", decisions[15.0].reason
+    assert TIME.travel_s(2.0, 0.0) < replace(TIME, drive_s_per_m=15.0).travel_s(2.0, 0.0) == pytest.approx(30.0)
