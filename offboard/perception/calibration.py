@@ -56,7 +56,7 @@ def calibration_world(target_picture: str, target_size_m: tuple[float, float, fl
     x, y = TARGET_XY
     posters = [("astronaut", 7.48, 2.5, 1.3, 180), ("coffee", 7.48, 8.5, 1.3, 180), ("rocket", 3.5, 10.98, 1.4, -90),
                ("hubble", 3.5, 0.02, 1.4, 90)]  # not chelsea: the target's picture is cut from it
-    text = [f'name = "calibration"', "[room]", f"size = {list(ROOM_M)}", 'texture = "brick"', "",
+    text = ['name = "calibration"', "[room]", f"size = {list(ROOM_M)}", 'texture = "brick"', "",
             "[[obstacle]]", 'name = "stand"', 'kind = "stand"', f"min = [{x - 0.15}, {y - 0.15}, 0.0]",
             f"max = [{x + 0.15}, {y + 0.15}, {bottom:.3f}]", 'texture = "wood"', ""]
     for name, px, py, pz, yaw in posters:
