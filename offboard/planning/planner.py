@@ -126,7 +126,8 @@ class SearchPlanner:
         self.time_model = replace(self.time_model, processing_s=seconds)
 
     def set_drive_s_per_m(self, seconds: float) -> None:
-        """The navigator's measured robot time per metre driven: part of every travel time from now on."""
+        """The measured time per metre of a move (robot time and the navigator's processing): part of
+        every travel time from now on."""
         self.time_model = replace(self.time_model, drive_s_per_m=seconds)
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float,

@@ -33,7 +33,7 @@ class TimeModel:
     pantilt: PanTiltLimits
     camera: CameraTiming
     processing_s: float = 0.5  # stereo, detection, map and belief update, planning (measured at run time)
-    drive_s_per_m: float = 0.0  # robot time per metre of navigation (measured at run time); 0: one straight drive
+    drive_s_per_m: float = 0.0  # time per metre of a move (measured at run time); 0: one straight drive
 
     @property
     def image_s(self) -> float:
