@@ -8,7 +8,8 @@ Each run's folder holds ``looks.jsonl``, written by the search, one JSON object 
 ``expected_p``: what the planner predicted for that look; ``realised_p``: the mass the exact update
 removed (or would have found); ``detected``: whether the detector fired. :func:`read_looks` reads
 and validates one file; :func:`calibration` bins looks by expected P; :func:`calibration_md` is the
-report's section.
+report's section. :func:`coverage` and :func:`coverage_md` say how much of the belief the looks rule
+out: the pace any search under that prior is held to.
 """
 
 from __future__ import annotations
@@ -136,3 +137,52 @@ def calibration_md(bins: list[CalibrationBin], source: str) -> list[str]:
     overall = "PASS" if checked and all(b.passes for b in checked) else ("FAIL" if checked else "not checked")
     return lines + ["", f"Calibration overall: **{overall}** ({sum(bool(b.passes) for b in checked)}/{len(checked)} "
                         "checked bins pass).", ""]
+
+
+COVERAGE_LOOKS = (6, 12, 24)
+
+
+@dataclass(frozen=True)
+class Coverage:
+    looks: int  # k
+    searching: int  # runs that took k looks without a detection
+    ruled_out: float | None  # their median P[F] after those k looks
+    found_within: float | None  # share of all runs that found the target in at most k looks
+
+
+def ruled_out(looks: list[Look]) -> list[float]:
+    """P[F] after each look before the first detection: the probability that the looks so far would
+    have found the target, 1 − Π(1 − realised P) (each realised P is eq. 1 on the belief before it)."""
+    missed, out = 1.0, []
+    for look in looks:
+        if look.detected:
+            break
+        missed *= 1.0 - look.realised_p
+        out.append(1.0 - missed)
+    return out
+
+
+def coverage(runs: list[tuple[list[Look], int | None]]) -> list[Coverage]:
+    """Per k of :data:`COVERAGE_LOOKS`, over ``runs`` (each its looks and the looks it took to find the
+    target, None if it did not)."""
+    rows = []
+    for k in COVERAGE_LOOKS:
+        after_k = [p[k - 1] for p in (ruled_out(looks) for looks, _ in runs) if len(p) >= k]
+        found = [found_at is not None and found_at <= k for _, found_at in runs]
+        rows.append(Coverage(k, len(after_k), statistics.median(after_k) if after_k else None,
+                             _mean([float(f) for f in found])))
+    return rows
+
+
+def coverage_md(rows: list[Coverage], source: str) -> list[str]:
+    """The report's section; ``source`` says which runs (worlds, seeds) the looks came from."""
+    lines = ["## Coverage: what the looks rule out", "",
+             f"Over {source}. P[F] after k looks without a detection: the probability, under the planner's model, "
+             "that those looks would have found the target (1 − Π(1 − realised P)), the share of the prior they "
+             "checked. Where it is small, a search that looks this way needs more than k looks in most rooms; the "
+             "last column is what happened (more than P[F] where targets are not placed as the prior says).", "",
+             "| Looks k | Runs with k looks and no detection | Their median P[F] | Runs that found it within k looks |",
+             "|---" * 4 + "|"]
+    lines += [f"| {r.looks} | {r.searching} | {_cell(r.ruled_out)} | "
+              f"{'—' if r.found_within is None else f'{r.found_within:.0%}'} |" for r in rows]
+    return lines + [""]

@@ -27,7 +27,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offboard.experiments.calibration import LOOKS_FILE, Look, calibration, calibration_md, read_looks
+from offboard.experiments.calibration import LOOKS_FILE, Look, calibration, calibration_md, coverage, coverage_md, read_looks
 
 COSTS = (1, 2, 3, 4)
 PRIORS = {"uniform": "No knowledge", "tables": "Knowledge"}
@@ -429,9 +429,9 @@ def _wall_md(rows: list[dict], sweep: tuple[int, float, int] | None = None) -> l
             "Mean per run: " + ", ".join(f"{m} {_fmt(w, 0)} s" for m, w in by_method.items()) + ".", ""]
 
 
-def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks: list[Look] = ()) -> str:
+def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks: list[list[Look]] = ()) -> str:
     """The report; ``sweep``: (runs, wall seconds, jobs) of the sweep that just ran, if one did; ``looks``:
-    the SYT runs' logged looks (the calibration)."""
+    each SYT run's logged looks, in the order of its rows (the calibration and the coverage)."""
     ours = syt_tables(rows)
     syt = [r for r in rows if r["method"] == "syt"]
     rate = sum(r["success"] for r in syt) / len(syt) if syt else None
@@ -454,7 +454,9 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
     lines += ["### Per method, cost function and prior", ""]
     lines += _stats_md([_stats(name, group) for name, group in variants(rows)], "Variant")
     lines += _per_world_md(rows) + _priors_md(rows)
-    lines += calibration_md(calibration(list(looks)), f"the SYT runs ({scope(syt)})")
+    lines += calibration_md(calibration([look for run in looks for look in run]), f"the SYT runs ({scope(syt)})")
+    found_at = [int(r["actions"]) if r["success"] else None for r in syt]
+    lines += coverage_md(coverage(list(zip(looks, found_at))), f"the SYT runs ({scope(syt)})")
     lines += ["## SYT against the baselines", ""] + _paired_md(rows)
     lines += ["## The report's six conclusions", ""]
     for i, v in enumerate(conclusions(ours), 1):
@@ -532,8 +534,8 @@ def write_plots(rows: list[dict], out: Path) -> list[Path]:
 def write_report(results: Path, out: Path, sweep: tuple[int, float, int] | None = None) -> list[Path]:
     """report.md and the plots beside it; returns what was written."""
     rows = load_results(results)
-    looks = [look for r in rows if r["method"] == "syt" and r["run_dir"]
-             for look in read_looks(Path(results).parent / r["run_dir"] / LOOKS_FILE)]
+    looks = [read_looks(Path(results).parent / r["run_dir"] / LOOKS_FILE) if r["run_dir"] else []
+             for r in rows if r["method"] == "syt"]
     out.mkdir(parents=True, exist_ok=True)
     report = out / "report.md"
     report.write_text(render(rows, sweep, looks))

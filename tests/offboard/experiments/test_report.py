@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from offboard.experiments.calibration import LOOKS_FILE, Look, calibration, parse_look, read_looks
+from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, coverage, coverage_md, parse_look,
+                                              read_looks)
 from offboard.experiments.harness import Run, make_row
 from offboard.experiments.report import COLUMNS, append_row, load_results, scope, write_report
 from offboard.experiments.world_facts import load_facts
@@ -108,6 +109,21 @@ def test_the_calibration_bins_looks_and_checks_each_bin_with_enough_looks(tmp_pa
     assert "| [0.2, 0.4) | 20 | 0.300 | 0.280 | 0.250 | PASS |" in text
     assert "| [0.4, 1] | 3 | 0.500 | 0.100 | 1.000 | — (< 20 looks) |" in text
     assert "Calibration overall: **FAIL** (1/2 checked bins pass)." in text
+    assert "## Coverage: what the looks rule out" in text and "Over the SYT runs (office; seeds 0,1" in text
+
+
+def test_coverage_is_what_the_looks_before_a_detection_ruled_out_beside_what_was_found():
+    def misses(n: int) -> list[Look]:  # each look rules out a tenth of what is left
+        return [Look(k, 0.1, 0.1, False, 0.0, 0.0) for k in range(1, n + 1)]
+
+    hit = Look(0, 0.5, 0.5, True, 0.0, 0.0)
+    runs = [(misses(12), None), (misses(6) + [hit, hit], 8), ([hit, hit], 2)]
+    by_k = {c.looks: c for c in coverage(runs)}
+    assert (by_k[6].searching, by_k[12].searching, by_k[24].searching) == (2, 1, 0)
+    assert by_k[6].ruled_out == pytest.approx(1 - 0.9 ** 6) and by_k[12].ruled_out == pytest.approx(1 - 0.9 ** 12)
+    assert by_k[24].ruled_out is None  # no run searched that long without a detection
+    assert [by_k[k].found_within for k in (6, 12, 24)] == pytest.approx([1 / 3, 2 / 3, 2 / 3])
+    assert "| 12 | 1 | 0.718 | 67% |" in coverage_md(coverage(runs), "three runs")
 
 
 def test_bin_edges_belong_to_the_upper_bin_and_one_to_the_last():
