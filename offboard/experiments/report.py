@@ -374,7 +374,8 @@ def _time_md(rows: list[dict]) -> list[str]:
     measured = [r for r in ok if r["processing_min"] is not None]
     lines = ["## Time: motion and processing", "",
              "Motion is the robot's clock (driving, turning, slewing the head, capturing). Processing is the measured "
-             "wall time of capture transfer, stereo, detection, mapping and planning. The report's minutes included "
+             "wall time of capture transfer, stereo, detection, mapping and planning, at the looks and along the moves "
+             "(the navigator's stereo, localisation and routing). The report's minutes included "
              f"about {REPORT_PROCESSING_S:g} s of processing per action, so only motion + processing compares like "
              "with like; Tables 2 and 3 show that sum."]
     if len(measured) < len(ok):
