@@ -42,7 +42,7 @@ from offboard.navigation.grid_planner import (Point, cell_center, distance_field
 from offboard.navigation.localization import MatchConfig, PoseTracker, ScanMatcher, map_field, scan_from_disparity
 from offboard.perception.occupancy import FloorMap, OccupancyGrid
 from offboard.robot.robot_client import CommandError, RobotClient
-from offboard.perception.stereo import StereoMatcher
+from offboard.perception.stereo import StereoConfig, StereoMatcher
 from offboard.navigation.tangent_bug import BugConfig, BugStep, TangentBug
 from shared.geometry import Pose2D
 
@@ -109,7 +109,7 @@ class Navigator:
     """Owns a :class:`PoseTracker`; shares the :class:`OccupancyGrid` it is given."""
 
     def __init__(self, robot: RobotClient, occupancy: OccupancyGrid, tracker: PoseTracker | None = None,
-                 config: NavigatorConfig = NavigatorConfig()):
+                 config: NavigatorConfig = NavigatorConfig(), stereo: StereoConfig = StereoConfig()):
         if any(occupancy.grid.origin_m[:2]):
             raise ValueError("floor maps are indexed from the world origin: the grid must start at x = y = 0")
         self.robot, self.occupancy, self.config = robot, occupancy, config
@@ -118,7 +118,7 @@ class Navigator:
         self._intrinsics, self._mount = info.intrinsics.to_intrinsics(), info.mount.to_mount()
         self._odom = robot.state().pose.to_pose()
         self.tracker = tracker if tracker is not None else PoseTracker(self._odom)
-        self._stereo = StereoMatcher()
+        self._stereo = StereoMatcher(stereo)  # the search's own: one map, one kind of depth
         self._matcher = ScanMatcher(config.match)
         self.matches_tried = self.matches_accepted = 0
         self.waiting_s = 0.0  # wall clock spent in robot commands: the rest of a run is processing

@@ -145,7 +145,7 @@ class Search:
         start = robot.state()
         self._clock_start_s = start.robot_time_s
         self.tracker = PoseTracker(start.pose.to_pose())
-        self.navigator = Navigator(robot, self.occupancy, self.tracker)
+        self.navigator = Navigator(robot, self.occupancy, self.tracker, stereo=config.stereo)
         self.state = SearchState()
         self.measure_driving()
         self.last_footprint = None

@@ -12,6 +12,7 @@ from offboard.bench.navigation import true_floor_map
 from offboard.navigation.grid_planner import path_length_m, shortest_path
 from offboard.navigation.navigator import Navigator, retry_busy
 from offboard.perception.occupancy import OccupancyGrid
+from offboard.perception.stereo import StereoConfig
 from offboard.perception.voxel_grid import VoxelGrid
 from onboard.sim.world import load_world
 
@@ -104,3 +105,14 @@ def test_a_stall_marks_the_unseen_obstacle_and_the_robot_goes_round(agent):
     truth = robot.sim_truth()
     assert 1 <= result.stalls < 4
     assert result.status == "reached" and math.dist((truth.x_m, truth.y_m), (5.0, 4.3)) < 0.2
+
+
+def test_the_navigator_senses_with_the_stereo_configuration_it_is_given(agent):
+    _, robot = agent
+    retry_busy(robot.sim_teleport, 1.5, 2.0, 0.0)
+    mapped = {}
+    for name, stereo in (("default", StereoConfig()), ("blind", StereoConfig(texture_threshold=1e6))):
+        navigator = Navigator(robot, OccupancyGrid(VoxelGrid((8.0, 6.0, 2.5), 0.05)), stereo=stereo)
+        navigator.sense(0.0)
+        mapped[name] = int(navigator.occupancy.observed.sum())
+    assert mapped["default"] > 1000 and mapped["blind"] == 0, mapped  # no window has that much texture
