@@ -66,6 +66,9 @@ class SearchConfig:
     empty_factor: float = field(default=1.0, metadata=bounds(0.0, 1.0))  # what such a cube keeps; 1: off (on the
     # dev suite, 0.05 cost more than it gained: one wrong far disparity marks the target's own cubes empty)
     max_actions: int = field(default=150, metadata=bounds(1, 10_000))
+    # 0: the planner's t(f) takes the processing measured so far (wall clock, so decisions depend on how
+    # loaded the machine is); > 0: this processing per look and none along moves, so a run repeats exactly
+    planned_processing_s: float = field(default=0.0, metadata=bounds(0.0, 60.0))
     planning_block_m: float = field(default=0.2, metadata=bounds(0.05, 2.0))  # the planner reads the belief in blocks
     max_planning_blocks: int = field(default=16_000, metadata=bounds(100, 10_000_000))  # larger rooms: larger blocks
     planner: PlannerConfig = PlannerConfig()
@@ -98,7 +101,7 @@ class SearchState:
     retaken: set[int] = field(default_factory=set)  # ... of those, the ones already looked at again to confirm
     motion_s: float = 0.0  # robot clock: driving, slewing, capture
     processing_s: float = 0.0  # wall clock: capture transfer, stereo, detection, mapping, update, planning
-    driving_s: float = 0.0  # moves between positions, both clocks: driving, and the looks and processing on the way
+    driving_s: float = 0.0  # moves between positions: robot clock, and processing unless planned_processing_s is set
     look_log: list[dict] = field(default_factory=list)  # per look: expected and realised P, times
 
     def took(self, setting: int, located: bool) -> None:
@@ -147,6 +150,8 @@ class Search:
         self.tracker = PoseTracker(start.pose.to_pose())
         self.navigator = Navigator(robot, self.occupancy, self.tracker, stereo=config.stereo)
         self.state = SearchState()
+        if config.planned_processing_s:
+            self.planner.set_processing_s(config.planned_processing_s)
         self.measure_driving()
         self.last_footprint = None
         self._pan_tilt = (math.radians(start.pan_deg), math.radians(start.tilt_deg))
@@ -236,7 +241,7 @@ class Search:
         motion_s = self.robot_time_s() - before
         self.state.motion_s += motion_s
         self.state.processing_s += result.processing_s
-        self.state.driving_s += motion_s + result.processing_s
+        self.state.driving_s += motion_s + (0.0 if self.config.planned_processing_s else result.processing_s)
         self.state.moved()
         self.state.distance_m += result.distance_m
         self.measure_driving()
@@ -294,7 +299,8 @@ class Search:
                            "realised_p": round(float(realised), 6), "detected": obs.detection is not None,
                            "processing_s": round(processing_s, 4), "motion_s": round(motion_s, 4),
                            "x_m": round(obs.pose.x_m, 3), "y_m": round(obs.pose.y_m, 3), "setting": decision.setting})
-        self.planner.set_processing_s(float(np.mean([look["processing_s"] for look in s.look_log])))
+        if not self.config.planned_processing_s:
+            self.planner.set_processing_s(float(np.mean([look["processing_s"] for look in s.look_log])))
 
     def _interpret(self, obs: Observation, table: DetectabilityTable) -> tuple[float, bool]:
         """Bayes on what the look saw: eq. 4 after a miss, the detection model after a detection.
