@@ -149,8 +149,10 @@ class SearchPlanner:
         far_t = self._candidate_times(pose, path_lengths_m)
         best_anywhere = max(here_detection.max(), np.where(np.isfinite(far_t), values.detection_prob[:-1], 0).max())
         if best_anywhere < self.config.min_detection_prob:
+            # a robot the map boxes in must not read as a room searched through: say which it is
+            boxed_in = "" if np.isfinite(far_t).any() else "; no other position is reachable on the map"
             return Decision("stop", f"no reachable action finds the target with probability ≥ "
-                                    f"{self.config.min_detection_prob:g}", status="exhausted",
+                                    f"{self.config.min_detection_prob:g}{boxed_in}", status="exhausted",
                             covering_here=here_covering, values=values)
         if self.config.cost_function == 1:
             decision = self._eq9(values, look_t, far_t, here_covering, pose)

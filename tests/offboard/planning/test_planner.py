@@ -124,7 +124,10 @@ def test_stops_when_the_budget_is_spent_or_nothing_is_left():
     empty = _planner(3)
     empty.belief.set_prior(np.zeros(ROOM.shape), prob_outside=0.0)  # all the mass outside the room
     d = empty.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(empty, START))
-    assert d.kind == "stop" and d.status == "exhausted"
+    assert d.kind == "stop" and d.status == "exhausted" and "reachable on the map" not in d.reason
+    boxed_in = _planner(3)  # the mass is far away and the map shows no way there
+    d = boxed_in.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), np.full(len(boxed_in.positions), np.inf))
+    assert d.status == "exhausted" and d.reason.endswith("no other position is reachable on the map")
 
 
 def test_unreachable_positions_are_never_chosen():
