@@ -455,9 +455,10 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
     lines += ["### Per method, cost function and prior", ""]
     lines += _stats_md([_stats(name, group) for name, group in variants(rows)], "Variant")
     lines += _per_world_md(rows) + _priors_md(rows)
-    lines += calibration_md(calibration([look for run in looks for look in run]), f"the SYT runs ({scope(syt)})")
+    source = f"the SYT runs ({scope(syt)})"
+    lines += calibration_md(calibration([look for run in looks for look in run]), source)
     found_at = [int(r["actions"]) if r["success"] else None for r in syt]
-    lines += coverage_md(coverage(list(zip(looks, found_at))), f"the SYT runs ({scope(syt)})")
+    lines += coverage_md(coverage(list(zip(looks, found_at))), source)
     lines += ["## SYT against the baselines", ""] + _paired_md(rows)
     lines += ["## The report's six conclusions", ""]
     for i, v in enumerate(conclusions(ours), 1):

@@ -254,9 +254,9 @@ class Search:
             log.warning("position (%.1f, %.1f) not reached: %s (%s)", goal[0], goal[1], result.status, result.reason)
 
     def measure_driving(self) -> None:
-        """Give the planner the time per metre that moves have taken so far (robot time and the
-        navigator's processing), starting from its nominal rate, which counts as ``_NOMINAL_DRIVE_M``
-        metres driven."""
+        """Give the planner the time per metre that moves have taken so far (robot time, and the
+        navigator's processing unless ``planned_processing_s`` is set), starting from its nominal rate,
+        which counts as ``_NOMINAL_DRIVE_M`` metres driven."""
         s = self.state
         nominal = self.navigator.nominal_s_per_m()
         self.planner.set_drive_s_per_m((nominal * _NOMINAL_DRIVE_M + s.driving_s) / (_NOMINAL_DRIVE_M + s.distance_m))
