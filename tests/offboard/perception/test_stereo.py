@@ -10,10 +10,14 @@ import numpy as np
 import pytest
 import skimage.data
 
+from onboard.config import CameraConfig
+from onboard.sim.render import StereoRenderer
+from onboard.sim.world import load_world
 from offboard.perception.middlebury import evaluate_motorcycle, evaluate_plain_block_matching
 from offboard.perception.stereo import (StereoConfig, StereoMatcher, bench_stereo_ms, depth_from_disparity,
                              points_from_disparity)
-from shared.geometry import Intrinsics
+from shared.geometry import Intrinsics, Pose2D
+from shared.world import suite_worlds
 
 H, W = 240, 320
 SMALL = StereoConfig(num_disparities=64)  # the synthetic pairs stay below 64 px
@@ -65,10 +69,10 @@ def test_motorcycle_meets_the_target_and_beats_plain_block_matching():
     assert plain["motorcycle_bad2"] > ours["motorcycle_bad2"]
 
 
-def test_sgbm_mode_gives_a_sane_result_on_the_motorcycle():
-    result = evaluate_motorcycle(StereoConfig(method="sgbm", num_disparities=64, block_size=5))
-    assert result["method"] == "sgbm"
-    assert result["motorcycle_bad2"] <= 0.08
+def test_sad_mode_gives_a_sane_result_on_the_motorcycle():
+    result = evaluate_motorcycle(StereoConfig(method="sad", num_disparities=64, block_size=9))
+    assert result["method"] == "sad"
+    assert result["motorcycle_bad2"] <= 0.05
     assert result["motorcycle_density"] >= 0.70
 
 
@@ -100,7 +104,8 @@ def test_two_planes_are_recovered():
     for d_px in (BACKGROUND_D, FOREGROUND_D):
         plane = truth == d_px
         valid = plane & np.isfinite(disparity)
-        assert valid.sum() > 0.7 * plane.sum()
+        # Texture validation over SGBM's 5 px window drops the smooth insides of the bricks.
+        assert valid.sum() > 0.6 * plane.sum()
         assert np.median(np.abs(disparity[valid] - d_px)) <= 0.5
 
 
@@ -108,8 +113,9 @@ def test_occluded_strip_fails_the_left_right_check():
     left, right, _ = _two_planes()
     strip = _occluded_strip()
     assert np.isnan(StereoMatcher(SMALL).disparity(left, right)[strip]).mean() > 0.9
-    # With uniqueness and speckle filtering off, only the left-right check can reject the strip.
-    bare = StereoConfig(num_disparities=64, uniqueness_ratio=0, speckle_window_px=0)
+    # SAD with uniqueness and speckle filtering off: only the left-right check can reject the strip.
+    bare = StereoConfig(method="sad", block_size=9, num_disparities=64, uniqueness_ratio=0,
+                        speckle_window_px=0)
     checked = StereoMatcher(bare).disparity(left, right)[strip]
     unchecked = StereoMatcher(replace(bare, lr_max_diff_px=math.inf)).disparity(left, right)[strip]
     assert np.isnan(checked).mean() > 0.9
@@ -128,9 +134,9 @@ def test_untextured_region_is_invalid():
     assert np.isfinite(disparity[:, 240:]).mean() > 0.9
 
 
-def test_sgbm_recovers_two_planes():
+def test_sad_recovers_two_planes():
     left, right, truth = _two_planes()
-    disparity = StereoMatcher(StereoConfig(method="sgbm", num_disparities=64, block_size=5)).disparity(
+    disparity = StereoMatcher(StereoConfig(method="sad", num_disparities=64, block_size=9)).disparity(
         left, right)
     valid = np.isfinite(disparity)
     assert valid.mean() > 0.7
@@ -197,3 +203,23 @@ def test_depth_from_disparity_keeps_nan():
     depth = depth_from_disparity(np.array([25.0, np.nan, 0.0], np.float32), K, BASELINE_M)
     np.testing.assert_allclose(depth[0], 2.0)
     assert np.isnan(depth[1:]).all()
+
+
+# ------------------------------------------------------------------------- a rendered room
+
+
+def test_default_matcher_sees_no_phantom_where_sad_does():
+    """A dev world's far wall, seen square-on, repeats its texture every 0.8 m: SAD matches it one
+    period over and puts a phantom wall 0.65 m in front of the camera; SGBM gives the wall's depth."""
+    camera = CameraConfig()
+    world = load_world(next(p for p in suite_worlds("dev") if p.stem == "room-1000-0"))
+    frame = StereoRenderer(world, camera.intrinsics(), camera.mount()).render(
+        Pose2D(7.29, 6.95, -3.124), 0.0, -0.15)
+    truth = camera.intrinsics().fx_px * camera.baseline_m / frame.depth_m
+
+    def phantom_share(config: StereoConfig) -> float:
+        disparity = StereoMatcher(config).disparity(frame.left, frame.right)
+        return float(np.mean(np.nan_to_num(disparity) > 1.33 * truth + 2.0))
+
+    assert phantom_share(StereoConfig(method="sad", block_size=9)) > 0.02
+    assert phantom_share(StereoConfig()) < 0.002
