@@ -5,6 +5,7 @@
     syt-offboard tour --connect ENDPOINT --out DIR           a short scripted drive, saving the images
     syt-offboard bench perception|planner|navigation|checkpoint --json
     syt-offboard bench safety --json [--load] [--trials N]  stop latencies when the planner is lost
+    syt-offboard bench stereo --views DIR --json           SAD and SGBM on rendered views of rooms
     syt-offboard calibrate-detector --detector sift --target-picture P --out TABLE.json
     syt-offboard experiment --preset paper --out DIR [--baselines] [--jobs N]
     syt-offboard fuzz --cases N [--json]            every decoder; --live: malformed queries to an agent
@@ -191,6 +192,18 @@ def _bench(args: argparse.Namespace) -> int:
 
         sys.stdout.write(json.dumps(run(args.trials, args.lease_ms, args.load)) + "\n")
         return 0
+    if args.what == "stereo":
+        from offboard.bench.stereo import run
+
+        if args.views is None:
+            log.error("bench stereo: --views DIR is required (write them with `syt-onboard worlds views`)")
+            return 2
+        try:
+            sys.stdout.write(json.dumps(run(args.views)) + "\n")
+        except ValueError as exc:
+            log.error("%s", exc)
+            return 2
+        return 0
     if args.what == "checkpoint":
         from offboard.bench.checkpoint import run
     elif args.what == "planner":
@@ -235,11 +248,12 @@ def _parser() -> argparse.ArgumentParser:
     harness.add_arguments(experiment)
     experiment.set_defaults(func=_experiment)
     bench = sub.add_parser("bench", help="measure a part; prints one JSON object")
-    bench.add_argument("what", choices=("perception", "planner", "navigation", "safety", "checkpoint"))
+    bench.add_argument("what", choices=("perception", "planner", "navigation", "safety", "checkpoint", "stereo"))
     bench.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")
     bench.add_argument("--trials", type=int, default=20, help="safety: trials of each fault")
     bench.add_argument("--lease-ms", type=int, default=DEFAULT_LEASE_MS, help="safety: the Zenoh link lease")
     bench.add_argument("--load", action="store_true", help="safety: also measure under load (4 state clients)")
+    bench.add_argument("--views", type=Path, metavar="DIR", help="stereo: views from `syt-onboard worlds views`")
     bench.set_defaults(func=_bench)
     from offboard.fuzz import command as fuzz  # its options live with it
 

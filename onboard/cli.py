@@ -182,15 +182,26 @@ def run_picture(argv: list[str]) -> int:
 
 
 def run_worlds(argv: list[str]) -> int:
-    """``worlds generate``: furnished rooms, each checked to be searchable before it is written."""
+    """``worlds generate``: furnished rooms, each checked to be searchable before it is written;
+    ``worlds views``: rendered pairs with true depth of worlds, to score stereo on."""
     parser = argparse.ArgumentParser(prog="syt-onboard worlds", description="World files.")
     commands = parser.add_subparsers(dest="command", required=True)
     generate = commands.add_parser("generate", help="write N generated rooms DIR/room-S-K.toml (same seed, same files)")
     generate.add_argument("--count", type=int, required=True, metavar="N")
     generate.add_argument("--seed", type=int, required=True, metavar="S")
     generate.add_argument("--out", type=Path, required=True, metavar="DIR")
+    views = commands.add_parser("views", help="render stereo pairs with true depth of worlds, to score stereo on")
+    views.add_argument("--worlds", required=True, metavar="NAMES",
+                       help="comma-separated suites (dev, test), bundled names or world files")
+    views.add_argument("--per-world", type=int, default=25, metavar="N")
+    views.add_argument("--seed", type=int, default=0, metavar="S")
+    views.add_argument("--out", type=Path, required=True, metavar="DIR")
     args = parser.parse_args(argv)
     _setup_logging(False)
+    if args.command == "views":
+        if args.per_world < 1:
+            parser.error(f"--per-world: must be at least 1, got {args.per_world}")
+        return _write_views(args)
     if args.count < 1:
         parser.error(f"--count: must be at least 1, got {args.count}")
     from onboard.sim.world_generator import write_worlds
@@ -202,6 +213,19 @@ def run_worlds(argv: list[str]) -> int:
         return 1
     for path in paths:
         sys.stdout.write(f"{path}\n")
+    return 0
+
+
+def _write_views(args: argparse.Namespace) -> int:
+    from onboard.sim.stereo_views import write_views
+    from shared.world import expand_suites
+
+    try:
+        index = write_views(list(expand_suites(args.worlds.split(","))), args.per_world, args.seed, args.out)
+    except (OSError, ValueError) as exc:  # WorldError is a ValueError
+        log.error("%s", exc)
+        return 2
+    sys.stdout.write(f"{index}\n")
     return 0
 
 

@@ -10,14 +10,10 @@ import numpy as np
 import pytest
 import skimage.data
 
-from onboard.config import CameraConfig
-from onboard.sim.render import StereoRenderer
-from onboard.sim.world import load_world
 from offboard.perception.middlebury import evaluate_motorcycle, evaluate_plain_block_matching
 from offboard.perception.stereo import (StereoConfig, StereoMatcher, bench_stereo_ms, depth_from_disparity,
                              points_from_disparity)
-from shared.geometry import Intrinsics, Pose2D
-from shared.world import suite_worlds
+from shared.geometry import Intrinsics
 
 H, W = 240, 320
 SMALL = StereoConfig(num_disparities=64)  # the synthetic pairs stay below 64 px
@@ -204,22 +200,3 @@ def test_depth_from_disparity_keeps_nan():
     np.testing.assert_allclose(depth[0], 2.0)
     assert np.isnan(depth[1:]).all()
 
-
-# ------------------------------------------------------------------------- a rendered room
-
-
-def test_default_matcher_sees_no_phantom_where_sad_does():
-    """A dev world's far wall, seen square-on, repeats its texture every 0.8 m: SAD matches it one
-    period over and puts a phantom wall 0.65 m in front of the camera; SGBM gives the wall's depth."""
-    camera = CameraConfig()
-    world = load_world(next(p for p in suite_worlds("dev") if p.stem == "room-1000-0"))
-    frame = StereoRenderer(world, camera.intrinsics(), camera.mount()).render(
-        Pose2D(7.29, 6.95, -3.124), 0.0, -0.15)
-    truth = camera.intrinsics().fx_px * camera.baseline_m / frame.depth_m
-
-    def phantom_share(config: StereoConfig) -> float:
-        disparity = StereoMatcher(config).disparity(frame.left, frame.right)
-        return float(np.mean(np.nan_to_num(disparity) > 1.33 * truth + 2.0))
-
-    assert phantom_share(StereoConfig(method="sad", block_size=9)) > 0.02
-    assert phantom_share(StereoConfig()) < 0.002
