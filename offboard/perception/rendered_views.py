@@ -48,6 +48,9 @@ def load_index(views_dir: Path) -> dict:
         index = json.loads(index_path.read_text())
         if not index["views"] or index["fx_px"] <= 0 or index["baseline_m"] <= 0:
             raise ValueError("no views, or a camera without focal length or baseline")
+        for view in index["views"]:
+            if not isinstance(view["folder"], str) or not isinstance(view["world"], str):
+                raise ValueError(f"view {view!r} lacks its world or folder")
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"{index_path}: not a views index written by `syt-onboard worlds views` ({exc})") from exc
     return index
@@ -55,9 +58,13 @@ def load_index(views_dir: Path) -> dict:
 
 def _read_view(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     left, right = (cv2.imread(str(folder / name), cv2.IMREAD_GRAYSCALE) for name in ("left.png", "right.png"))
-    if left is None or right is None:
-        raise ValueError(f"{folder}: left.png or right.png is missing or unreadable")
-    return left, right, np.load(folder / "depth.npy")
+    try:
+        depth = np.load(folder / "depth.npy")
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{folder}: depth.npy is missing or unreadable ({exc})") from exc
+    if left is None or right is None or left.shape != depth.shape or right.shape != depth.shape:
+        raise ValueError(f"{folder}: left.png, right.png and depth.npy must all be there, of one size")
+    return left, right, depth
 
 
 def score_views(views_dir: Path, config: StereoConfig) -> ViewScores:

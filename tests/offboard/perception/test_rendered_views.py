@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 
 import pytest
 
@@ -56,3 +57,11 @@ def test_a_directory_without_views_is_refused_by_name(tmp_path):
     with pytest.raises(ValueError, match="views.json"):
         score_views(tmp_path, StereoConfig())
     assert main(["bench", "stereo", "--views", str(tmp_path), "--json"]) == 2
+
+
+def test_a_view_with_missing_depth_is_refused_by_name(views, tmp_path):
+    broken = tmp_path / "broken"
+    shutil.copytree(views, broken)
+    (broken / "view-1" / "depth.npy").unlink()
+    with pytest.raises(ValueError, match="view-1.*depth.npy"):
+        score_views(broken, StereoConfig())
