@@ -1,8 +1,9 @@
 """``syt-offboard bench stereo --views DIR --json``: both matchers on rendered views of rooms.
 
 The views come from ``syt-onboard worlds views``; the figures are those of
-:mod:`offboard.perception.rendered_views` for SAD (9 px window) and SGBM (5 px, the default), with
-the worlds and seed that made the views, so every figure says where it comes from.
+:mod:`offboard.perception.rendered_views` for SAD (9 px window) and SGBM (5 px), with the worlds
+and seed that made the views, so every figure says where it comes from, and which of the two the
+search uses by default.
 """
 
 from __future__ import annotations
@@ -20,10 +21,9 @@ MATCHERS = {"sad": StereoConfig(method="sad", block_size=9), "sgbm": StereoConfi
 
 def run(views_dir: Path) -> dict:
     index = load_index(views_dir)
-    figures: dict = {"views_dir": str(views_dir), "seed": index.get("seed"),
-                     "worlds": sorted({view["world"] for view in index["views"]}),
-                     "default": StereoConfig().method}
-    for name, config in MATCHERS.items():
-        log.info("scoring %s on %d views", name, len(index["views"]))
-        figures[name] = score_views(views_dir, config).as_dict()
-    return figures
+    log.info("scoring %s on %d views", " and ".join(MATCHERS), len(index["views"]))
+    scores = score_views(views_dir, MATCHERS)
+    default = next((name for name, config in MATCHERS.items() if config == StereoConfig()), "other")
+    return {"views_dir": str(views_dir), "seed": index.get("seed"), "default": default,
+            "worlds": sorted({view["world"] for view in index["views"]}),
+            **{name: s.as_dict() for name, s in scores.items()}}

@@ -3,12 +3,15 @@
 ``syt-onboard worlds views`` writes the views (its ``views.json`` names each one's world, pose and
 tilt). Each is scored against its true disparity ``f·B / depth``, with three figures:
 
-- *bad2* and *density*, as for Middlebury (:mod:`offboard.perception.middlebury`);
+- *bad2* and *density*, as for Middlebury (:mod:`offboard.perception.middlebury`). Pixels nearer
+  than ``f·B / num_disparities`` (0.46 m with the defaults) count as known, though no matcher can
+  answer them, so density is a little below what the matcher could reach;
 - *phantom share*: the fraction of answered pixels whose disparity is too large by more than a
   third (and 2 px): a surface put much nearer than it is. Too far is harmless to the map (free space
   is carved a little too deep); too near puts an obstacle where there is none;
-- *phantom views*: views where phantoms cover more than ``PHANTOM_VIEW_SHARE`` of the image. That
-  many pixels in one place is a wall where there is none, and it can close the robot in.
+- *phantom views*: views where such pixels cover more than ``PHANTOM_VIEW_SHARE`` of the image. On
+  a regular wall the wrong match takes whole regions, and that is a wall where there is none: it can
+  close the robot in.
 """
 
 from __future__ import annotations
@@ -28,12 +31,45 @@ PHANTOM_VIEW_SHARE = 0.02
 
 
 @dataclass(frozen=True)
+class PixelCounts:
+    """One view's pixels: with a true depth, answered (both), over 2 px off, too near."""
+
+    known: int
+    answered: int
+    bad: int
+    phantom: int
+    pixels: int
+
+    @property
+    def phantom_view(self) -> bool:
+        return self.phantom > PHANTOM_VIEW_SHARE * self.pixels
+
+
+def count_pixels(disparity: np.ndarray, truth: np.ndarray) -> PixelCounts:
+    """Compare a disparity map (NaN = no answer) with the true disparity (NaN or inf = unknown)."""
+    known = np.isfinite(truth)
+    ok = known & np.isfinite(disparity)
+    error = disparity[ok] - truth[ok]
+    too_near = (error > BAD_THRESHOLD_PX) & (disparity[ok] > PHANTOM_RATIO * truth[ok])
+    return PixelCounts(int(known.sum()), int(ok.sum()), int((np.abs(error) > BAD_THRESHOLD_PX).sum()),
+                       int(too_near.sum()), disparity.size)
+
+
+@dataclass(frozen=True)
 class ViewScores:
-    bad2: float
+    bad2: float  # 1 when nothing is answered: a blind matcher scores no better than a wrong one
     density: float
     phantom_share: float
     phantom_views: int
     views: int
+
+    @classmethod
+    def of(cls, counts: list[PixelCounts]) -> ViewScores:
+        answered = sum(c.answered for c in counts)
+        if answered == 0:
+            return cls(1.0, 0.0, 0.0, 0, len(counts))
+        return cls(sum(c.bad for c in counts) / answered, answered / max(sum(c.known for c in counts), 1),
+                   sum(c.phantom for c in counts) / answered, sum(c.phantom_view for c in counts), len(counts))
 
     def as_dict(self) -> dict:
         return {"bad2": round(self.bad2, 5), "density": round(self.density, 4),
@@ -57,32 +93,26 @@ def load_index(views_dir: Path) -> dict:
 
 
 def _read_view(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    left, right = (cv2.imread(str(folder / name), cv2.IMREAD_GRAYSCALE) for name in ("left.png", "right.png"))
+    """(left RGB, right RGB, depth): RGB as the robot's frames reach the matcher."""
+    left, right = (cv2.imread(str(folder / name), cv2.IMREAD_COLOR) for name in ("left.png", "right.png"))
     try:
-        depth = np.load(folder / "depth.npy")
+        depth = np.load(folder / "depth.npy").astype(np.float32)
     except (OSError, ValueError) as exc:
         raise ValueError(f"{folder}: depth.npy is missing or unreadable ({exc})") from exc
-    if left is None or right is None or left.shape != depth.shape or right.shape != depth.shape:
+    if left is None or right is None or left.shape[:2] != depth.shape or right.shape[:2] != depth.shape:
         raise ValueError(f"{folder}: left.png, right.png and depth.npy must all be there, of one size")
-    return left, right, depth
+    return cv2.cvtColor(left, cv2.COLOR_BGR2RGB), cv2.cvtColor(right, cv2.COLOR_BGR2RGB), depth
 
 
-def score_views(views_dir: Path, config: StereoConfig) -> ViewScores:
-    """Score one matcher on every view of ``views_dir``."""
+def score_views(views_dir: Path, configs: dict[str, StereoConfig]) -> dict[str, ViewScores]:
+    """Score each named matcher on every view of ``views_dir`` (each view is read once)."""
     index = load_index(views_dir)
-    matcher = StereoMatcher(config)
-    known = answered = bad = phantom = phantom_views = 0
+    matchers = {name: StereoMatcher(config) for name, config in configs.items()}
+    counts: dict[str, list[PixelCounts]] = {name: [] for name in configs}
     for view in index["views"]:
         left, right, depth = _read_view(Path(views_dir) / view["folder"])
-        truth = index["fx_px"] * index["baseline_m"] / depth
-        disparity = matcher.disparity(left, right)
-        ok = np.isfinite(disparity) & np.isfinite(truth)
-        error = disparity[ok] - truth[ok]
-        too_near = (error > BAD_THRESHOLD_PX) & (disparity[ok] > PHANTOM_RATIO * truth[ok])
-        known += int(np.isfinite(truth).sum())
-        answered += int(ok.sum())
-        bad += int((np.abs(error) > BAD_THRESHOLD_PX).sum())
-        phantom += int(too_near.sum())
-        phantom_views += int(too_near.sum() > PHANTOM_VIEW_SHARE * disparity.size)
-    return ViewScores(bad / max(answered, 1), answered / max(known, 1), phantom / max(answered, 1),
-                      phantom_views, len(index["views"]))
+        with np.errstate(divide="ignore"):  # zero depth (no surface) is an unknown disparity
+            truth = np.where(depth > 0, index["fx_px"] * index["baseline_m"] / depth, np.nan)
+        for name, matcher in matchers.items():
+            counts[name].append(count_pixels(matcher.disparity(left, right), truth))
+    return {name: ViewScores.of(c) for name, c in counts.items()}

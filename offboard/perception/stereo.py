@@ -4,8 +4,8 @@ The default matcher is semi-global matching (OpenCV's ``StereoSGBM``, Hirschmül
 block cost aggregated along three directions with penalties on disparity changes).
 Sum-of-Absolute-Differences block matching, which the original robot's Triclops used (``StereoBM``:
 x-Sobel prefilter, SAD over a square window, uniqueness test), is selectable with
-``method = "sad"``. SAD is about 3 times faster (30 against 89 ms a 640x480 pair with the checks
-below, on this 2-core machine) but decides each window alone, and on a regular pattern
+``method = "sad"``. SAD is about 3 times faster (``stereo_ms`` of ``bench perception``: 30 against
+89 ms a 640x480 pair with the checks below, on a 2-core cloud VM) but decides each window alone, and on a regular pattern
 seen square-on (a tiled or brick wall) it can lock onto the match one period over. That is a
 consistent wrong disparity, far too large, and it survives every check below: a phantom wall in
 front of the camera at B / (B + T) of the true depth (baseline B, pattern period T on the wall),

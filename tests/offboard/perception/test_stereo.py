@@ -199,4 +199,3 @@ def test_depth_from_disparity_keeps_nan():
     depth = depth_from_disparity(np.array([25.0, np.nan, 0.0], np.float32), K, BASELINE_M)
     np.testing.assert_allclose(depth[0], 2.0)
     assert np.isnan(depth[1:]).all()
-

@@ -9,6 +9,7 @@ import pytest
 
 from onboard.cli import main
 from onboard.sim.world import load_world
+from onboard.sim.stereo_views import sample_views
 from onboard.sim.world_check import reachable_floor
 
 
@@ -30,8 +31,17 @@ def test_views_stand_on_reachable_floor_with_true_depth(tmp_path):
 
 
 def test_the_same_seed_gives_the_same_views(tmp_path):
-    assert _views(tmp_path, "a")["views"] == _views(tmp_path, "b")["views"]
-    assert _views(tmp_path, "c", seed=4)["views"] != _views(tmp_path, "a")["views"]
+    first = _views(tmp_path, "a")["views"]
+    assert _views(tmp_path, "b")["views"] == first
+    left = [(tmp_path / run / first[0]["folder"] / "left.png").read_bytes() for run in ("a", "b")]
+    assert left[0] == left[1]
+    assert _views(tmp_path, "c", seed=4)["views"] != first
+
+
+def test_each_world_draws_from_the_seed_and_its_own_name():
+    alone = sample_views("office", load_world("office"), 3, seed=5)
+    assert sample_views("office", load_world("office"), 3, seed=5) == alone
+    assert sample_views("paper-lab", load_world("paper-lab"), 3, seed=5) != alone
 
 
 def test_bad_arguments_are_refused(tmp_path):
