@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from onboard.config import CameraConfig
-from onboard.sim.preview import write_preview
+from onboard.sim.preview import write_frame
+from onboard.sim.render import StereoRenderer
 from onboard.sim.world import load_world
 from onboard.sim.world_check import reachable_floor
 from shared.geometry import Pose2D
@@ -60,10 +61,13 @@ def write_view_set(views: list[View], out_dir: Path, seed: int | None = None,
                    camera: CameraConfig = CameraConfig()) -> Path:
     """Render ``views`` into ``out_dir`` with their index; returns the path of ``views.json``."""
     intrinsics, mount = camera.intrinsics(), camera.mount()
+    renderers: dict[str, StereoRenderer] = {}  # building one costs about as much as a render
     entries = []
     for k, view in enumerate(views):
+        if view.world not in renderers:
+            renderers[view.world] = StereoRenderer(_world(view.world), intrinsics, mount)
         folder = f"view-{k:04d}"
-        write_preview(_world(view.world), view.pose, 0.0, view.tilt_rad, out_dir / folder, intrinsics, mount)
+        write_frame(renderers[view.world].render(view.pose, 0.0, view.tilt_rad), out_dir / folder)
         entries.append({"world": view.world, "pose": [view.pose.x_m, view.pose.y_m, math.degrees(view.pose.heading_rad)],
                         "tilt_deg": math.degrees(view.tilt_rad), "folder": folder})
     index = out_dir / "views.json"
