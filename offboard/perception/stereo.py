@@ -1,21 +1,21 @@
 """Dense stereo on the head's rectified pair: disparity in the left image, then 3D points.
 
-The default matcher is semi-global matching (OpenCV's ``StereoSGBM``, Hirschmüller 2008: a
-block cost aggregated along three directions with penalties on disparity changes).
+The default matcher is semi-global matching (OpenCV's ``StereoSGBM``, Hirschmüller 2008: a block
+cost aggregated along three directions with penalties on disparity changes).
 Sum-of-Absolute-Differences block matching, which the original robot's Triclops used (``StereoBM``:
-x-Sobel prefilter, SAD over a square window, uniqueness test), is selectable with
-``method = "sad"``. SAD is about 3 times faster (``stereo_ms`` of ``bench perception``: 30 against
-89 ms a 640x480 pair with the checks below, on a 2-core cloud VM) but decides each window alone, and on a regular pattern
-seen square-on (a tiled or brick wall) it can lock onto the match one period over. That is a
-consistent wrong disparity, far too large, and it survives every check below: a phantom wall in
-front of the camera at B / (B + T) of the true depth (baseline B, pattern period T on the wall),
-which can close the robot in. SGBM's smoothness penalties pull many such windows to their
+x-Sobel prefilter, SAD over a square window, uniqueness test), is selectable with ``method =
+"sad"``. SAD is about 3 times faster (``stereo_ms`` of ``bench perception``: 30 against 89 ms a
+640x480 pair with the checks below, on a 2-core cloud VM) but decides each window alone, and on a
+regular pattern seen square-on (a tiled or brick wall) it can lock onto the match one period over.
+That is a consistent wrong disparity, far too large, and it survives every check below: a phantom
+wall in front of the camera at B / (B + T) of the true depth (baseline B, pattern period T on the
+wall), which can close the robot in. SGBM's smoothness penalties pull many such windows to their
 neighbours' true disparity. On 900 rendered views of the ``dev`` worlds (``syt-onboard worlds views
 --worlds dev --per-world 25``, seeds 0, 1 and 2; ``syt-offboard bench stereo``), SGBM put half as
 many pixels too near (0.04-0.07 % of its answers against 0.07-0.13 %) and had phantoms over more
-than 2 % of the image in 5 views against SAD's 9. It answers 91 % of the pixels against 86-87 %,
-but smooths more across edges: 0.18-0.22 % of its answers are over 2 px off, against 0.11-0.17 %.
-Both go through the same validation, which is ours rather than OpenCV's:
+than 2 % of the image in 5 views against SAD's 9. It answers 91 % of the pixels against 86-87 %, but
+smooths more across edges: 0.18-0.22 % of its answers are over 2 px off, against 0.11-0.17 %. Both
+go through the same validation, which is ours rather than OpenCV's:
 
 - **left-right consistency**: the pair is matched a second time with both images mirrored and
   swapped, which gives the disparity of every *right* pixel; a left pixel survives only if the
