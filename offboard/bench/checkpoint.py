@@ -25,7 +25,7 @@ from offboard.perception.voxel_grid import VoxelGrid
 from offboard.planning.belief import TargetBelief
 from offboard.planning.detection_function import look_footprint, visible_depth
 from offboard.search import checkpoint
-from offboard.search.loop import SearchConfig
+from offboard.search.loop import SearchConfig, seen_empty
 from offboard.search.run import SearchRequest
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 from shared.transport import TransportConfig
@@ -56,8 +56,7 @@ def realistic_state(looks: int = LOOKS, seed: int = 0) -> tuple[TargetBelief, Oc
         seen = visible_depth(disparity, occupancy, camera, K, MOUNT.baseline_m, 16, table.range_m[1])
         footprint = look_footprint(grid, camera, K, seen, 16, table, belief.facing_azimuths_rad, 0.12)
         belief.update_after_miss(footprint.cube_index, footprint.detection_prob)
-        empty = occupancy.observed & (occupancy.log_odds <= config.empty_log_odds)
-        belief.rule_out_empty(empty, config.empty_factor)  # as the search does after every look
+        belief.rule_out_empty(seen_empty(occupancy, config), config.empty_factor)  # as the search does after every look
     return belief, occupancy
 
 

@@ -114,6 +114,27 @@ class OccupancyGrid:
     def occupied(self) -> np.ndarray:
         return self.log_odds >= self.config.occupied_log_odds
 
+    def seen_empty(self, max_log_odds: float, margin_cubes: int = 0) -> np.ndarray:
+        """Cubes observed at or below ``max_log_odds`` whose every neighbour within ``margin_cubes``
+        (a cube's neighbourhood, the room's outside included) is too: a surface, unknown space or a
+        wall that near keeps a cube from counting as empty, so one wrong far disparity through a
+        target standing on a table does not carve its centre out of the belief."""
+        empty = self.observed & (self.log_odds <= max_log_odds)
+        if margin_cubes <= 0:
+            return empty
+        near_something = ~empty
+        for axis in range(3):  # a cube's neighbourhood is separable: dilate along each axis in turn
+            grown = near_something.copy()
+            moved = np.moveaxis(grown, axis, 0)
+            source = np.moveaxis(near_something, axis, 0)
+            for k in range(1, margin_cubes + 1):
+                moved[k:] |= source[:-k]
+                moved[:-k] |= source[k:]
+            moved[:margin_cubes] = True
+            moved[-margin_cubes:] = True
+            near_something = grown
+        return ~near_something
+
     def cast_rays(self, origins_m: np.ndarray, directions: np.ndarray, max_range_m: float,
                   stop_at_unknown: bool = False) -> RayHits:
         """Walk each ray to the first occupied cube (or the room's boundary, or ``max_range_m``);

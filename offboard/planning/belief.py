@@ -14,7 +14,8 @@ With one sector this is exactly eq. 4.
 
 Stereo sees more than the detector does: a cube it has seen empty (space in front of a visible
 surface) cannot hold the target's centre, whichever way the target faces. :meth:`rule_out_empty`
-folds that in once per cube, with a likelihood ``empty_factor`` > 0 for stereo's mistakes.
+folds that in once per cube, with a likelihood ``empty_factor`` > 0 for stereo's mistakes; which
+cubes count as empty is the occupancy map's :meth:`~offboard.perception.occupancy.OccupancyGrid.seen_empty`.
 
 Masses are stored scaled (``stored × scale`` is the probability) so that the normalisation of eq. 4
 costs one scalar instead of a pass over every cube. The planner also reads a coarse copy (cubes

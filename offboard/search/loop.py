@@ -63,8 +63,10 @@ class SearchConfig:
     weak_false_positive_rate: float = field(default=0.1, metadata=bounds(1e-6, 0.9))  # α of a weak detection
     detection_sigma_m: float = field(default=0.1, metadata=bounds(0.01, 2.0))  # located centre's error, near
     empty_log_odds: float = field(default=-0.8, metadata=bounds(-20.0, 0.0))  # seen empty: no target centre there
-    empty_factor: float = field(default=1.0, metadata=bounds(0.0, 1.0))  # what such a cube keeps; 1: off (on the
-    # dev suite, 0.05 cost more than it gained: one wrong far disparity marks the target's own cubes empty)
+    empty_factor: float = field(default=0.05, metadata=bounds(0.0, 1.0))  # what such a cube keeps (stereo errs); 1: off
+    # ... unless this near anything not seen empty: a target rests on something, so its centre is never
+    # farther than its half size (0.115 m) from a surface; rounded up to a cube
+    empty_margin_m: float = field(default=0.15, metadata=bounds(0.0, 1.0))
     max_actions: int = field(default=150, metadata=bounds(1, 10_000))
     # 0: the planner's t(f) takes the processing measured so far (wall clock, so decisions depend on how
     # loaded the machine is); > 0: this processing per look and none along moves, so a run repeats exactly
@@ -321,8 +323,7 @@ class Search:
             realised = self.belief.expected_detection(footprint.cube_index, footprint.detection_prob)
             found = self._detected(obs, table, footprint)
         if self.config.empty_factor < 1.0:  # what stereo saw through holds no target
-            empty = self.occupancy.observed & (self.occupancy.log_odds <= self.config.empty_log_odds)
-            self.belief.rule_out_empty(empty, self.config.empty_factor)
+            self.belief.rule_out_empty(seen_empty(self.occupancy, self.config), self.config.empty_factor)
         return realised, found
 
     def _detected(self, obs: Observation, table: DetectabilityTable, footprint) -> bool:
@@ -434,6 +435,12 @@ class Search:
         title = (f"{s.status}: {s.actions} looks, {len(s.positions)} positions, {s.distance_m:.1f} m, "
                  f"{self.robot_time_s() / 60:.1f} min robot time")
         draw_top_view(path, self.config.room_m, floor, s.trail, s.looks, self.intrinsics.hfov_rad, s.estimate_m, title)
+
+
+def seen_empty(occupancy: OccupancyGrid, config: SearchConfig) -> np.ndarray:
+    """The cubes whose target mass :meth:`TargetBelief.rule_out_empty` takes away: seen empty, and at
+    least ``empty_margin_m`` from anything that is not (see :meth:`OccupancyGrid.seen_empty`)."""
+    return occupancy.seen_empty(config.empty_log_odds, round(config.empty_margin_m / config.resolution_m))
 
 
 def planning_block_factor(config: SearchConfig) -> int:

@@ -114,3 +114,20 @@ def test_a_coarsened_map_keeps_obstacles_and_what_was_observed():
     assert coarse.observed.sum() < occ.observed.sum() and (coarse.state() == FREE).any()
     rays = coarse.cast_rays(_facing_east().translation, np.array([[1.0, 0, 0]]), 10.0)
     assert rays.distance_m[0] == pytest.approx(2.0, abs=0.25)
+
+
+def test_seen_empty_keeps_a_margin_around_surfaces_unknown_space_and_the_room():
+    occ = OccupancyGrid(ROOM)
+    cam = _facing_east()
+    occ.integrate_disparity(_wall_disparity(3.0), K, MOUNT.baseline_m, cam)
+    occ.integrate_disparity(_wall_disparity(3.0), K, MOUNT.baseline_m, cam)  # twice: log-odds -0.8 before the wall
+    j, k = int(2.0 / 0.05), int(1.2 / 0.05)
+    i_wall = int(np.argmax(occ.occupied()[:, j, k]))
+    plain = occ.seen_empty(-0.8)
+    kept = occ.seen_empty(-0.8, margin_cubes=3)
+    assert plain[i_wall - 3, j, k] and not kept[i_wall - 3, j, k]  # next to the wall: kept
+    assert kept[i_wall - 10, j, k]  # open air in front of it: empty
+    assert not kept[:, :, :3].any() and not kept[:3].any()  # the floor, the room's boundary
+    assert not (kept & ~plain).any()  # a margin only ever keeps more
+    occ.observed[i_wall - 10, j + 2, k] = False  # unknown space two cubes beside it: kept
+    assert not occ.seen_empty(-0.8, margin_cubes=3)[i_wall - 10, j, k]
