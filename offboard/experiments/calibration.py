@@ -6,7 +6,9 @@ Each run's folder holds ``looks.jsonl``, written by the search, one JSON object 
     {"action": 3, "expected_p": 0.12, "realised_p": 0.10, "detected": false, "processing_s": 1.4, "motion_s": 6.2}
 
 ``expected_p``: what the planner predicted for that look; ``realised_p``: the mass the exact update
-removed (or would have found); ``detected``: whether the detector fired. :func:`read_looks` reads
+removed (or would have found); ``detected``: whether the detector fired. In the harness's runs a look
+also has ``x_m``, ``y_m`` (where the robot believed it stood) and ``true_x_m``, ``true_y_m`` (the
+simulator's truth): :func:`localisation_md` sums up the difference. :func:`read_looks` reads
 and validates one file; :func:`calibration` bins looks by expected P; :func:`calibration_md` is the
 report's section. :func:`coverage` and :func:`coverage_md` say how much of the belief the looks rule
 out: the pace any search under that prior is held to.
@@ -24,6 +26,7 @@ LOOKS_FILE = "looks.jsonl"
 BIN_EDGES = (0.0, 0.05, 0.1, 0.2, 0.4, 1.0)  # the last bin includes 1
 MIN_LOOKS = 20  # a bin with fewer looks is shown but not checked
 TOLERANCE = 0.2  # |mean expected − mean realised| ≤ this × mean expected
+LOCALISATION_FAR_M = 0.3  # a pose error the report counts: the success radius is 0.5 m
 
 
 @dataclass(frozen=True)
@@ -34,6 +37,7 @@ class Look:
     detected: bool
     processing_s: float
     motion_s: float
+    pose_error_m: float | None = None  # |estimated − true| position, where the log has both
 
 
 _FIELDS = {"action": int, "expected_p": float, "realised_p": float, "detected": bool, "processing_s": float,
@@ -66,7 +70,15 @@ def parse_look(text: str, where: str = "look") -> Look:
     for name in ("expected_p", "realised_p"):
         if not 0.0 <= values[name] <= 1.0 + 1e-9:
             raise ValueError(f"{where}: {name} = {values[name]!r} is not a probability")
+    if "true_x_m" in data:
+        for name in _POSE_FIELDS:
+            if not _is(data.get(name), float):
+                raise ValueError(f"{where}: {name} = {data.get(name)!r} is not a finite float")
+        values["pose_error_m"] = math.hypot(data["x_m"] - data["true_x_m"], data["y_m"] - data["true_y_m"])
     return Look(**values)
+
+
+_POSE_FIELDS = ("x_m", "y_m", "true_x_m", "true_y_m")
 
 
 def read_looks(path: Path) -> list[Look]:
@@ -186,3 +198,18 @@ def coverage_md(rows: list[Coverage], source: str) -> list[str]:
     lines += [f"| {r.looks} | {r.searching} | {_cell(r.ruled_out)} | "
               f"{'—' if r.found_within is None else f'{r.found_within:.0%}'} |" for r in rows]
     return lines + [""]
+
+
+def localisation_md(looks: list[Look], source: str) -> list[str]:
+    """The report's section on where the robot believed it stood at its looks against where it stood
+    (the simulator's truth); nothing if no look logged the truth."""
+    errors = sorted(x.pose_error_m for x in looks if x.pose_error_m is not None)
+    if not errors:
+        return []
+    p95 = errors[min(len(errors) - 1, math.ceil(0.95 * len(errors)) - 1)]
+    far = sum(e > LOCALISATION_FAR_M for e in errors) / len(errors)
+    return ["## Localisation at the looks", "",
+            f"Over {source}: {len(errors)} looks. The distance between the position the planner believed the "
+            f"robot was at and the simulator's true position: median {statistics.median(errors):.3f} m, p95 "
+            f"{p95:.3f} m, max {errors[-1]:.3f} m; {far:.0%} of the looks were more than {LOCALISATION_FAR_M:g} m "
+            "off. An error here moves what the look saw, and where a detection puts the target, by as much.", ""]

@@ -185,7 +185,7 @@ class _RunWorker:
                                 move_threshold=spec.move_threshold,
                                 config_path=None if spec.config_path is None else Path(spec.config_path),
                                 out_dir=Path(spec.out_dir), record=False, checkpoint=False)  # a failed run is re-run
-        return run_search(transport, request, policy, self._detectors)
+        return run_search(transport, request, policy, self._detectors, after_action=log_true_pose)
 
     def close(self) -> None:
         """Stop the agent; the next run (after a failed one: its state is not to be trusted) starts a fresh one."""
@@ -205,6 +205,16 @@ class _RunWorker:
                 agent.wait_ready(session, "syt")
             self._agent_world = world_path
         return self._transport
+
+
+def log_true_pose(search, robot) -> None:
+    """Put the simulator's true pose beside the estimate in the newest look's log entry (``true_x_m``,
+    ``true_y_m``): the robot has not moved since that look, and the pair tells a localisation error
+    from a stereo one. The experimenter's truth: written after the look, never read by the search."""
+    looks = search.state.look_log
+    if looks and looks[-1]["action"] == search.state.actions and "true_x_m" not in looks[-1]:
+        pose = robot.sim_truth()
+        looks[-1].update(true_x_m=round(pose.x_m, 3), true_y_m=round(pose.y_m, 3))
 
 
 def _serve(log_dir: Path) -> int:

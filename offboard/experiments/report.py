@@ -27,7 +27,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offboard.experiments.calibration import LOOKS_FILE, Look, calibration, calibration_md, coverage, coverage_md, read_looks
+from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, calibration_md, coverage, coverage_md,
+                                              localisation_md, read_looks)
 
 COSTS = (1, 2, 3, 4)
 PRIORS = {"uniform": "No knowledge", "tables": "Knowledge"}
@@ -459,6 +460,7 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
     lines += calibration_md(calibration([look for run in looks for look in run]), source)
     found_at = [int(r["actions"]) if r["success"] else None for r in syt]
     lines += coverage_md(coverage(list(zip(looks, found_at))), source)
+    lines += localisation_md([look for run in looks for look in run], source)
     lines += ["## SYT against the baselines", ""] + _paired_md(rows)
     lines += ["## The report's six conclusions", ""]
     for i, v in enumerate(conclusions(ours), 1):

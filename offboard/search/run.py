@@ -7,8 +7,10 @@ view) and ``search.log``.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -97,11 +99,14 @@ def dynamic_priors(specs: tuple[str, ...], grid: VoxelGrid, model: TargetModel) 
 
 
 def run_search(transport: TransportConfig, request: SearchRequest, policy=None, detector_cache: dict | None = None,
-               resume: Checkpoint | None = None) -> dict:
+               resume: Checkpoint | None = None,
+               after_action: Callable[[Search, RobotClient], None] | None = None) -> dict:
     """Run one search; ``policy`` (a factory taking the SearchPlanner) replaces the SYT decisions.
     ``detector_cache`` keeps the detectors (and their tables) for later searches of the same target
     with the same camera: building a SIFT model takes seconds. ``resume``: carry on from a
-    checkpoint (the log is appended to, the recording goes to a new file)."""
+    checkpoint (the log is appended to, the recording goes to a new file). ``after_action``: the
+    experimenter's hook after every action, before the checkpoint (the harness logs the simulator's
+    true pose with it; the search itself never sees it)."""
     out = request.out_dir
     out.mkdir(parents=True, exist_ok=True)
     file_log = logging.FileHandler(out / "search.log", mode="a" if resume else "w")
@@ -133,6 +138,8 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
                 from offboard.search.checkpoint import attach  # (it imports this module)
 
                 attach(search, request, transport, resume)
+            if after_action:
+                search.on_action = _chain(functools.partial(after_action, robot=robot), search.on_action)
             try:
                 search.run()
             finally:
@@ -151,6 +158,14 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
             recorder.close()
         root.removeHandler(file_log)
         file_log.close()
+
+
+def _chain(first: Callable[[Search], None], then: Callable[[Search], None] | None) -> Callable[[Search], None]:
+    def both(search: Search) -> None:
+        first(search)
+        if then:
+            then(search)
+    return both
 
 
 def _name_file(spec: str) -> tuple[str, Path]:
