@@ -7,8 +7,9 @@ Each run's folder holds ``looks.jsonl``, written by the search, one JSON object 
 
 ``expected_p``: what the planner predicted for that look; ``realised_p``: the mass the exact update
 removed (or would have found); ``detected``: whether the detector fired. In the harness's runs a look
-also has ``x_m``, ``y_m`` (where the robot believed it stood) and ``true_x_m``, ``true_y_m`` (the
-simulator's truth): :func:`localisation_md` sums up the difference. :func:`read_looks` reads
+also has ``x_m``, ``y_m``, ``heading_deg`` (the pose the robot believed it had) and ``true_x_m``,
+``true_y_m``, ``true_heading_deg`` (the simulator's truth): :func:`localisation_md` sums up the
+difference. :func:`read_looks` reads
 and validates one file; :func:`calibration` bins looks by expected P; :func:`calibration_md` is the
 report's section. :func:`coverage` and :func:`coverage_md` say how much of the belief the looks rule
 out: the pace any search under that prior is held to.
@@ -38,6 +39,7 @@ class Look:
     processing_s: float
     motion_s: float
     pose_error_m: float | None = None  # |estimated − true| position, where the log has both
+    heading_error_deg: float | None = None  # |estimated − true| heading, likewise
 
 
 _FIELDS = {"action": int, "expected_p": float, "realised_p": float, "detected": bool, "processing_s": float,
@@ -75,10 +77,11 @@ def parse_look(text: str, where: str = "look") -> Look:
             if not _is(data.get(name), float):
                 raise ValueError(f"{where}: {name} = {data.get(name)!r} is not a finite float")
         values["pose_error_m"] = math.hypot(data["x_m"] - data["true_x_m"], data["y_m"] - data["true_y_m"])
+        values["heading_error_deg"] = abs(math.remainder(data["heading_deg"] - data["true_heading_deg"], 360.0))
     return Look(**values)
 
 
-_POSE_FIELDS = ("x_m", "y_m", "true_x_m", "true_y_m")
+_POSE_FIELDS = ("x_m", "y_m", "heading_deg", "true_x_m", "true_y_m", "true_heading_deg")
 
 
 def read_looks(path: Path) -> list[Look]:
@@ -206,10 +209,16 @@ def localisation_md(looks: list[Look], source: str) -> list[str]:
     errors = sorted(x.pose_error_m for x in looks if x.pose_error_m is not None)
     if not errors:
         return []
-    p95 = errors[min(len(errors) - 1, math.ceil(0.95 * len(errors)) - 1)]
+    turns = sorted(x.heading_error_deg for x in looks if x.heading_error_deg is not None)
     far = sum(e > LOCALISATION_FAR_M for e in errors) / len(errors)
     return ["## Localisation at the looks", "",
             f"Over {source}: {len(errors)} looks. The distance between the position the planner believed the "
             f"robot was at and the simulator's true position: median {statistics.median(errors):.3f} m, p95 "
-            f"{p95:.3f} m, max {errors[-1]:.3f} m; {far:.0%} of the looks were more than {LOCALISATION_FAR_M:g} m "
-            "off. An error here moves what the look saw, and where a detection puts the target, by as much.", ""]
+            f"{_p95(errors):.3f} m, max {errors[-1]:.3f} m; {far:.0%} of the looks were more than "
+            f"{LOCALISATION_FAR_M:g} m off. The heading's error: median {statistics.median(turns):.1f}°, p95 "
+            f"{_p95(turns):.1f}°, max {turns[-1]:.1f}° (at 3 m, 1° moves a point 5 cm sideways). An error here moves "
+            "what the look saw, and where a detection puts the target, by as much.", ""]
+
+
+def _p95(ordered: list[float]) -> float:
+    return ordered[min(len(ordered) - 1, math.ceil(0.95 * len(ordered)) - 1)]

@@ -209,12 +209,14 @@ class _RunWorker:
 
 def log_true_pose(search, robot) -> None:
     """Put the simulator's true pose beside the estimate in the newest look's log entry (``true_x_m``,
-    ``true_y_m``): the robot has not moved since that look, and the pair tells a localisation error
-    from a stereo one. The experimenter's truth: written after the look, never read by the search."""
+    ``true_y_m``, ``true_heading_deg``): the robot has not moved since that look, and the pair tells a
+    localisation error from a stereo one. The experimenter's truth: written after the look, never
+    read by the search."""
     looks = search.state.look_log
     if looks and looks[-1]["action"] == search.state.actions and "true_x_m" not in looks[-1]:
         pose = robot.sim_truth()
-        looks[-1].update(true_x_m=round(pose.x_m, 3), true_y_m=round(pose.y_m, 3))
+        looks[-1].update(true_x_m=round(pose.x_m, 3), true_y_m=round(pose.y_m, 3),
+                         true_heading_deg=round(pose.heading_deg, 2))
 
 
 def _serve(log_dir: Path) -> int:

@@ -300,7 +300,8 @@ class Search:
         s.look_log.append({"action": s.actions, "expected_p": round(float(decision.detection_prob), 6),
                            "realised_p": round(float(realised), 6), "detected": obs.detection is not None,
                            "processing_s": round(processing_s, 4), "motion_s": round(motion_s, 4),
-                           "x_m": round(obs.pose.x_m, 3), "y_m": round(obs.pose.y_m, 3), "setting": decision.setting})
+                           "x_m": round(obs.pose.x_m, 3), "y_m": round(obs.pose.y_m, 3),
+                           "heading_deg": round(math.degrees(obs.pose.heading_rad), 2), "setting": decision.setting})
         if not self.config.planned_processing_s:
             self.planner.set_processing_s(float(np.mean([look["processing_s"] for look in s.look_log])))
 

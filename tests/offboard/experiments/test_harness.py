@@ -293,7 +293,7 @@ def test_a_tiny_sweep_end_to_end_and_a_redone_run_gives_the_same_numbers(tmp_pat
     assert set(rows) == {"uniform", "tables"} and all(r["success"] == "True" for r in rows.values())
     assert float(rows["uniform"]["estimate_error_m"]) < 0.3 and (tmp_path / "report.md").is_file()
     looks = read_looks(tmp_path / rows["uniform"]["run_dir"] / LOOKS_FILE)  # the simulator's truth beside each look
-    assert looks and all(look.pose_error_m is not None and look.pose_error_m < 0.3 for look in looks)
+    assert looks and all(look.pose_error_m < 0.3 and look.heading_error_deg < 5.0 for look in looks)
     lines = (tmp_path / "results.csv").read_text().splitlines()
     (tmp_path / "results.csv").write_text("\n".join(lines[:-1]) + "\n")  # as if the last run never finished
     assert experiment.main(_args(*argv)) == 0

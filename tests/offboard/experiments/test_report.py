@@ -142,9 +142,10 @@ def test_bin_edges_belong_to_the_upper_bin_and_one_to_the_last():
     ('{"action": 1, "expected_p": 0.1, "realised_p": NaN, "detected": false, "processing_s": 1, "motion_s": 2}',
      "realised_p"),
     ('{"action": 1, "expected_p": 0.1, "realised_p": 0.1, "detected": false, "processing_s": 1, "motion_s": 2, '
-     '"x_m": 1.0, "y_m": 2.0, "true_x_m": "here", "true_y_m": 2.0}', "true_x_m"),
+     '"x_m": 1.0, "y_m": 2.0, "heading_deg": 0, "true_x_m": "here", "true_y_m": 2.0, "true_heading_deg": 0}',
+     "true_x_m"),
     ('{"action": 1, "expected_p": 0.1, "realised_p": 0.1, "detected": false, "processing_s": 1, "motion_s": 2, '
-     '"true_x_m": 1.0, "true_y_m": 2.0}', "x_m"),
+     '"x_m": 1.0, "y_m": 2.0, "true_x_m": 1.0, "true_y_m": 2.0, "true_heading_deg": 0}', "heading_deg"),
     ("[1, 2]", "expected an object"),
     ("{not json", "not JSON"),
 ])
@@ -159,13 +160,15 @@ def test_a_malformed_look_is_refused_naming_the_line_and_field(tmp_path, text, n
 
 def test_the_report_sums_up_how_far_the_believed_pose_was_from_the_true_one_at_the_looks(tmp_path):
     results = tmp_path / "results.csv"
-    at = {"x_m": 1.0, "y_m": 2.0, "true_y_m": 2.0}
-    looks = [{**_look(0.1, 0.1), **at, "true_x_m": 1.0 + off} for off in (0.0, 0.1, 0.1, 0.2, 0.5)]
+    at = {"x_m": 1.0, "y_m": 2.0, "true_y_m": 2.0, "heading_deg": 179.0}
+    looks = [{**_look(0.1, 0.1), **at, "true_x_m": 1.0 + off, "true_heading_deg": -179.0 - 10 * off}
+             for off in (0.0, 0.1, 0.1, 0.2, 0.5)]  # headings across ±180°: 0° to 3° apart
     _row(results, "syt", "office", "uniform", 0, 100.0, 30.0, looks + [_look(0.1, 0.1)])  # one look without truth
     write_report(results, tmp_path)
     text = (tmp_path / "report.md").read_text()
     assert ("## Localisation at the looks" in text and "5 looks" in text and "median 0.100 m, p95 0.500 m, "
             "max 0.500 m; 20% of the looks were more than 0.3 m off" in text)
+    assert "The heading's error: median 1.0°, p95 3.0°, max 3.0°" in text
     assert parse_look(json.dumps(_look(0.1, 0.1))).pose_error_m is None  # a search outside the harness
 
 
