@@ -6,13 +6,14 @@ Each run's folder holds ``looks.jsonl``, written by the search, one JSON object 
     {"action": 3, "expected_p": 0.12, "realised_p": 0.10, "detected": false, "processing_s": 1.4, "motion_s": 6.2}
 
 ``expected_p``: what the planner predicted for that look; ``realised_p``: the mass the exact update
-removed (or would have found); ``detected``: whether the detector fired. In the harness's runs a look
-also has ``x_m``, ``y_m``, ``heading_deg`` (the pose the robot believed it had) and ``true_x_m``,
-``true_y_m``, ``true_heading_deg`` (the simulator's truth): :func:`localisation_md` sums up the
-difference. :func:`read_looks` reads
-and validates one file; :func:`calibration` bins looks by expected P; :func:`calibration_md` is the
+removed (or would have found); ``detected``: whether the detector fired. :func:`read_looks` reads and
+validates one file; :func:`calibration` bins looks by expected P; :func:`calibration_md` is the
 report's section. :func:`coverage` and :func:`coverage_md` say how much of the belief the looks rule
 out: the pace any search under that prior is held to.
+
+A look also has ``x_m``, ``y_m``, ``heading_deg``: the pose the robot believed it had. In the
+harness's runs it has the simulator's truth beside them, ``true_x_m``, ``true_y_m``,
+``true_heading_deg``; :func:`localisation_md` sums up the difference.
 """
 
 from __future__ import annotations
