@@ -114,26 +114,32 @@ class OccupancyGrid:
     def occupied(self) -> np.ndarray:
         return self.log_odds >= self.config.occupied_log_odds
 
-    def seen_empty(self, max_log_odds: float, margin_cubes: int = 0) -> np.ndarray:
-        """Cubes observed at or below ``max_log_odds`` whose every neighbour within ``margin_cubes``
-        (a cube's neighbourhood, the room's outside included) is too: a surface, unknown space or a
-        wall that near keeps a cube from counting as empty, so one wrong far disparity through a
-        target standing on a table does not carve its centre out of the belief."""
+    def seen_empty(self, max_log_odds: float, margin_cubes: int = 0, resting: bool = False) -> np.ndarray:
+        """Cubes observed at or below ``max_log_odds`` that cannot hold a target's centre, given its
+        half size ``margin_cubes``, so that one wrong far disparity through a target does not carve
+        its centre out of the belief:
+
+        - by default, every neighbour within the margin (the room's outside included) is seen empty
+          too: a surface, unknown space or a wall that near keeps a cube;
+        - ``resting`` (the target stands on a horizontal surface): no support top lies within the
+          margin sideways and ``margin_cubes + 1`` below (the extra cube: stereo's error in the top's
+          height). A support top is a cube not seen empty (a surface, or unknown space that may be
+          one) under a cube seen empty, or the floor. Open space beside a wall or under the ceiling
+          is empty; space just above a table, a shelf or the floor is kept."""
         empty = self.observed & (self.log_odds <= max_log_odds)
         if margin_cubes <= 0:
             return empty
-        near_something = ~empty
-        for axis in range(3):  # a cube's neighbourhood is separable: dilate along each axis in turn
-            grown = near_something.copy()
-            moved = np.moveaxis(grown, axis, 0)
-            source = np.moveaxis(near_something, axis, 0)
-            for k in range(1, margin_cubes + 1):
-                moved[k:] |= source[:-k]
-                moved[:-k] |= source[k:]
-            moved[:margin_cubes] = True
-            moved[-margin_cubes:] = True
-            near_something = grown
-        return ~near_something
+        if resting:
+            tops = np.zeros_like(empty)
+            tops[:, :, :-1] = ~empty[:, :, :-1] & empty[:, :, 1:]
+            holds = _grown(tops, 2, margin_cubes + 1, 0, outside=True)  # the floor: the outside below z = 0
+            for axis in (0, 1):  # the room's walls have no top to stand on
+                holds = _grown(holds, axis, margin_cubes, margin_cubes, outside=False)
+        else:
+            holds = ~empty
+            for axis in range(3):  # a cube's neighbourhood is separable: grow along each axis in turn
+                holds = _grown(holds, axis, margin_cubes, margin_cubes, outside=True)
+        return empty & ~holds
 
     def cast_rays(self, origins_m: np.ndarray, directions: np.ndarray, max_range_m: float,
                   stop_at_unknown: bool = False) -> RayHits:
@@ -340,3 +346,18 @@ def _cast_one(log_odds, observed, start, direction, max_t, occupied_lo, free_lo,
             k += sk
             tk += dk
     return max_t, False, crossed_unknown
+
+
+def _grown(mask: np.ndarray, axis: int, before: int, after: int, outside: bool) -> np.ndarray:
+    """``mask`` grown along ``axis``: a cube is set if one at most ``before`` cubes before it or
+    ``after`` cubes after it is; beyond the grid's ends counts as ``outside``."""
+    grown = mask.copy()
+    out, src = np.moveaxis(grown, axis, 0), np.moveaxis(mask, axis, 0)
+    for k in range(1, before + 1):
+        out[k:] |= src[:-k]
+    for k in range(1, after + 1):
+        out[:-k] |= src[k:]
+    if outside:
+        out[:before] = True
+        out[len(out) - after:] = True
+    return grown

@@ -67,6 +67,9 @@ class SearchConfig:
     # ... unless this near anything not seen empty: a target rests on something, so its centre is never
     # farther than its half size (0.115 m) from a surface; rounded up to a cube
     empty_margin_m: float = field(default=0.15, metadata=bounds(0.0, 1.0))
+    # ... and it stands on a horizontal surface: only space just above one (a table, a shelf, the floor,
+    # or unknown space) keeps it; False: space near a wall or the ceiling too (a target hung on a wall)
+    resting_target: bool = True
     max_actions: int = field(default=150, metadata=bounds(1, 10_000))
     # 0: the planner's t(f) takes the processing measured so far (wall clock, so decisions depend on how
     # loaded the machine is); > 0: this processing per look and none along moves, so a run repeats exactly
@@ -440,8 +443,10 @@ class Search:
 
 def seen_empty(occupancy: OccupancyGrid, config: SearchConfig) -> np.ndarray:
     """The cubes whose target mass :meth:`TargetBelief.rule_out_empty` takes away: seen empty, and at
-    least ``empty_margin_m`` from anything that is not (see :meth:`OccupancyGrid.seen_empty`)."""
-    return occupancy.seen_empty(config.empty_log_odds, round(config.empty_margin_m / config.resolution_m))
+    least ``empty_margin_m`` from anything that is not or, for a ``resting_target``, from the top of
+    anything it could stand on (see :meth:`OccupancyGrid.seen_empty`)."""
+    return occupancy.seen_empty(config.empty_log_odds, round(config.empty_margin_m / config.resolution_m),
+                                config.resting_target)
 
 
 def planning_block_factor(config: SearchConfig) -> int:

@@ -3,6 +3,8 @@ target standing on a surface it has seen."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.voxel_grid import VoxelGrid
 from offboard.search.loop import SearchConfig, seen_empty
@@ -24,3 +26,28 @@ def test_a_target_seen_through_on_a_table_keeps_its_centre_and_the_open_air_abov
     assert empty[tuple(grid.index_of([1.5, 1.5, 1.3]))]  # far above the table: open air
     assert empty[tuple(grid.index_of([3.0, 3.0, 1.3]))]
     assert config.empty_factor < 1.0  # and the search rules it out by default
+
+
+def test_a_resting_target_needs_something_to_stand_on_within_its_half_size():
+    config = SearchConfig()
+    assert config.resting_target  # the default
+    grid = VoxelGrid((4.0, 4.0, 2.5), config.resolution_m)
+    occupancy = OccupancyGrid(grid)
+    occupancy.observed[:] = True
+    occupancy.log_odds[:] = config.empty_log_odds
+    occupancy.log_odds[grid.index_of([3.98, 0.0, 0.0])[0]:] = 1.0  # a wall at x = 3.95 m, floor to ceiling
+    low, high = grid.index_of([0.5, 2.5, 0.0]), grid.index_of([1.0, 3.0, 0.5])
+    occupancy.observed[low[0]:high[0] + 1, low[1]:high[1] + 1, :high[2] + 1] = False  # unknown up to 0.5 m
+    resting = seen_empty(occupancy, config)
+    anywhere = seen_empty(occupancy, replace(config, resting_target=False))
+
+    def empty(x, y, z, mask):
+        return bool(mask[tuple(grid.index_of([x, y, z]))])
+
+    assert empty(3.85, 1.0, 1.3, resting) and not empty(3.85, 1.0, 1.3, anywhere)  # beside the wall, mid-air
+    assert empty(2.0, 2.0, 2.42, resting) and not empty(2.0, 2.0, 2.42, anywhere)  # under the ceiling
+    assert not empty(2.0, 2.0, TARGET_HALF_M, resting)  # on the floor
+    assert not empty(0.75, 2.75, 0.5 + TARGET_HALF_M, resting)  # on what unknown space may hide
+    assert not empty(1.05, 2.75, 0.5 + TARGET_HALF_M, resting)  # ... overhanging its edge by less than half
+    assert empty(0.75, 2.75, 0.9, resting) and empty(2.0, 2.0, 0.5, resting)  # above either, out of reach
+    assert not (resting & ~occupancy.seen_empty(config.empty_log_odds)).any()  # only ever seen-empty cubes
