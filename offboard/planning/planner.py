@@ -20,7 +20,10 @@ E(f) = P_Ψ(f) / t(f). When to stop looking here is the ``move_rule``:
 - ``"rate"`` (default): while the best look here finds more per second than the best visit
   elsewhere, travel included — eq. 3 applied over every action, a visit being the best few looks
   from one position. It needs no threshold, so it holds whether a look rules a place out at once
-  (the report's target that faces the camera) or only for the facings it saw (a one-sided target);
+  (the report's target that faces the camera) or only for the facings it saw (a one-sided target).
+  The visit must beat the look here by ``leave_margin``: the best visit overstates what the search
+  finds per second after it (the visits that follow are worse), and leaving forfeits the looks left
+  here, which after the move cost a trip back;
 - ``"threshold"``: the report's rule, while the covering probability here is at least Θ_move.
 
 Eq. 9 is read with the detection probability of eq. 1 (Σ p·b), which is what the report's text
@@ -60,6 +63,8 @@ class PlannerConfig:
     viewpoints: int = field(default=24, metadata=bounds(0, 1000))  # aimed at the belief, per decision
     viewpoint_lattice_m: float = field(default=0.25, metadata=bounds(0.05, 2.0))  # they snap to it (cached geometry)
     visit_looks: int = field(default=4, metadata=bounds(1, 64))  # the most looks a visit is credited with
+    leave_margin: float = field(default=2.0, metadata=bounds(1.0, 100.0))  # the "rate" rule leaves when a visit
+    # finds this many times more per second than the best look here
     tilts_deg: tuple[float, ...] = (0.0, 30.0)  # the report's two tilts
     view_overlap: float = field(default=0.4, metadata=bounds(0.0, 0.9))  # between neighbouring settings
     same_position_m: float = field(default=0.5, metadata=bounds(0.0, 5.0))  # "here" for a candidate
@@ -180,11 +185,11 @@ class SearchPlanner:
         else:
             here_rate = float((here / look_t).max())
             visit = self._visit_rates(values, far_t, path_lengths_m, pose)
-            worth = visit > here_rate
+            worth = visit > here_rate * self.config.leave_margin
             j = int(np.argmax(visit))
             move = bool(worth[j])
             why = (f"a visit to ({self.positions[j][0]:.2f}, {self.positions[j][1]:.2f}) finds {visit[j]:.4f}/s, "
-                   f"the best look here {here_rate:.4f}/s")
+                   f"the best look here {here_rate:.4f}/s (leaving takes {self.config.leave_margin:g}× that)")
         if not move and here.max() < self.config.min_detection_prob:
             move, why = True, f"no look left here finds it with probability ≥ {self.config.min_detection_prob:g}"
         return move, why, worth

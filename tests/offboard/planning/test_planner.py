@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -160,6 +161,18 @@ def test_a_look_here_is_left_for_a_visit_that_finds_more_per_second_travel_inclu
     assert d.kind == "move", d.reason
 
 
+def test_the_leave_margin_keeps_the_robot_looking_until_a_visit_is_that_many_times_better():
+    boxes = (HintBox((1.9, 2.4, 1.1), (2.1, 2.6, 1.3), 0.1), HintBox((3.4, 2.4, 1.1), (3.6, 2.6, 1.3), 0.9))
+    pose = Pose2D(2.0, 1.5, math.pi / 2)
+    eager = _planner(3, boxes=boxes, leave_margin=1.0)
+    d = eager.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(eager, pose))
+    visit, here = (float(v) for v in re.findall(r"(\d+\.\d+)/s", d.reason))
+    assert d.kind == "move" and 1.0 < visit / here < 10.0, d.reason
+    for margin, kind in ((0.9 * visit / here, "move"), (1.1 * visit / here, "look")):
+        planner = _planner(3, boxes=boxes, leave_margin=max(1.0, margin))
+        assert planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose)).kind == kind
+
+
 def test_cost_1_moves_carry_their_setting_and_never_to_where_the_robot_stands():
     planner = _planner(1)
     d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))
@@ -217,7 +230,7 @@ def test_travel_is_costed_at_the_navigators_measured_rate():
     pose = Pose2D(2.0, 1.5, math.pi / 2)
     decisions = {}
     for rate in (0.0, 15.0):
-        planner = _planner(3, boxes=boxes)
+        planner = _planner(3, boxes=boxes, leave_margin=1.0)  # the rate alone decides
         planner.set_drive_s_per_m(rate)
         decisions[rate] = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose))
     assert decisions[0.0].kind == "move", decisions[0.0].reason
