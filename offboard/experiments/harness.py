@@ -41,6 +41,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -48,10 +49,13 @@ from offboard.experiments.baselines import BASELINES, BaselineContext
 from offboard.experiments.report import append_row, finished_keys, write_report
 from offboard.experiments.world_facts import (Placement, Start, WorldFacts, load_facts, robot_starts, tables_hints,
                                        target_placements, viewpoint)
-from offboard.search.loop import SearchConfig
+from offboard.search.loop import Search, SearchConfig
 from shared.arguments import floats, probability
 from shared.config import load_config
 from shared.world import expand_suites
+
+if TYPE_CHECKING:
+    from offboard.robot.robot_client import RobotClient
 
 log = logging.getLogger(__name__)
 
@@ -207,7 +211,7 @@ class _RunWorker:
         return self._transport
 
 
-def log_true_pose(search, robot) -> None:
+def log_true_pose(search: Search, robot: RobotClient) -> None:
     """Put the simulator's true pose beside the estimate in the newest look's log entry (``true_x_m``,
     ``true_y_m``, ``true_heading_deg``): the robot has not moved since that look, and the pair tells a
     localisation error from a stereo one. The experimenter's truth: written after the look, never
