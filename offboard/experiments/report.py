@@ -457,10 +457,11 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
     lines += _stats_md([_stats(name, group) for name, group in variants(rows)], "Variant")
     lines += _per_world_md(rows) + _priors_md(rows)
     source = f"the SYT runs ({scope(syt)})"
-    lines += calibration_md(calibration([look for run in looks for look in run]), source)
+    every_look = [look for run in looks for look in run]
+    lines += calibration_md(calibration(every_look), source)
     found_at = [int(r["actions"]) if r["success"] else None for r in syt]
     lines += coverage_md(coverage(list(zip(looks, found_at))), source)
-    lines += localisation_md([look for run in looks for look in run], source)
+    lines += localisation_md(every_look, source)
     lines += ["## SYT against the baselines", ""] + _paired_md(rows)
     lines += ["## The report's six conclusions", ""]
     for i, v in enumerate(conclusions(ours), 1):
