@@ -354,19 +354,23 @@ def robot_starts(world: WorldFacts, count: int = 5, margin_m: float = 0.45,
 
 def tables_hints(world: WorldFacts, layer_m: float = 0.3, mass: float = 0.9) -> str:
     """The ``tables`` (knowledge) prior as a hints file: the layer just above each of the world's
-    :meth:`~WorldFacts.knowledge_surfaces` shares ``mass`` by area."""
+    :meth:`~WorldFacts.knowledge_surfaces` holds the same share of ``mass``.
+
+    The knowledge is the report's "the target is on one of the tables": which pieces, not where on
+    them. So each piece is equally likely, whatever its size; sharing by area would send the robot
+    to the largest tops first and leave a small crate for last."""
     tables = world.knowledge_surfaces()
     if not tables:
         raise ValueError(f"{world.name}: no table, desk or surface under its target for the tables prior")
-    areas = [(t.max_m[0] - t.min_m[0]) * (t.max_m[1] - t.min_m[1]) for t in tables]
     kinds = " or ".join(sorted({t.kind for t in tables}))
-    lines = [f"# the target is on a {kinds} of {world.name}: {mass:g} of the mass just above their tops"]
-    for table, area in zip(tables, areas):
+    lines = [f"# the target is on a {kinds} of {world.name}: {mass:g} of the mass just above their tops, "
+             f"the same on each"]
+    for table in tables:
         top = min(table.max_m[2] + layer_m, world.room_m[2])
         lines += ["[[hint]]", f'name = "{table.name}"',
                   f"min = [{table.min_m[0]:g}, {table.min_m[1]:g}, {table.max_m[2]:g}]",
                   f"max = [{table.max_m[0]:g}, {table.max_m[1]:g}, {top:g}]",
-                  f"weight = {mass * area / sum(areas):.6f}", ""]
+                  f"weight = {mass / len(tables):.6f}", ""]
     return "\n".join(lines)
 
 
