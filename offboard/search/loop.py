@@ -58,7 +58,9 @@ class SearchConfig:
     prob_outside: float = field(default=0.05, metadata=bounds(0.0, 0.99))  # p(c_out) at the start
     detector: Literal["sift", "ncc", "auto"] = "sift"
     found_prob: float = field(default=0.95, metadata=bounds(0.5, 1.0))  # belief near a detection to call it found
-    found_radius_m: float = field(default=0.3, metadata=bounds(0.05, 2.0))  # ... within this of it
+    # ... within this of it: wider than a located detection's spread (3 σ of its depth: 0.35 m at 2.6 m),
+    # or even decisive evidence falls short and the robot drives on to confirm; the harness's success radius
+    found_radius_m: float = field(default=0.5, metadata=bounds(0.05, 2.0))
     false_positive_rate: float = field(default=0.005, metadata=bounds(1e-6, 0.5))  # α at least: 0 of 200 negatives
     weak_false_positive_rate: float = field(default=0.1, metadata=bounds(1e-6, 0.9))  # α of a weak detection
     detection_sigma_m: float = field(default=0.1, metadata=bounds(0.01, 2.0))  # located centre's error, near

@@ -15,6 +15,7 @@ from offboard.planning.belief import TargetBelief
 from offboard.planning.detection_function import look_footprint, visible_depth
 from offboard.planning.detection_model import (depth_sigma_m, detection_likelihood, located_along_rays,
                                                located_at_point)
+from offboard.search.loop import SearchConfig
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 
 K = Intrinsics.from_fov(640, 480, 66.0)
@@ -90,6 +91,18 @@ def test_depth_uncertainty_grows_with_distance():
     far = depth_sigma_m(5.0, K, 0.12, 0.1)
     assert near == pytest.approx(0.1, abs=0.01) and far > 0.2
     assert math.isfinite(far)
+
+
+def test_the_search_calls_a_decisive_detection_at_the_far_end_of_its_range_found():
+    # Its located centre spreads up to 3 σ (0.35 m at 2.6 m), so a found radius of 0.3 m would leave a
+    # quarter of even decisive evidence outside it, and the robot would drive on to confirm.
+    config = SearchConfig()
+    at = np.array([CAMERA.translation[0] + 2.6, 1.5, CAMERA.translation[2]])
+    belief = TargetBelief(ROOM, facing_sectors=config.facing_sectors)
+    fp = _look(belief)
+    located = located_at_point(ROOM, fp.cube_index, at, depth_sigma_m(2.6, K, 0.12, config.detection_sigma_m))
+    belief.observe(fp.cube_index, detection_likelihood(ROOM, fp.cube_index, fp.detection_prob, located, 1e-7))
+    assert belief.mass_near(at, config.found_radius_m) >= config.found_prob
 
 
 def test_no_detector_is_infallible():
