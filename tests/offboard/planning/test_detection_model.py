@@ -30,9 +30,9 @@ def _look(belief: TargetBelief):
     return look_footprint(ROOM, CAMERA, K, depth, 16, table, belief.facing_azimuths_rad, 0.1)
 
 
-def _detect(belief: TargetBelief, at: np.ndarray, alpha: float) -> None:
+def _detect(belief: TargetBelief, at: np.ndarray, alpha: float, sigma_m: float = 0.1) -> None:
     fp = _look(belief)
-    located = located_at_point(ROOM, fp.cube_index, at, 0.1)
+    located = located_at_point(ROOM, fp.cube_index, at, sigma_m)
     belief.observe(fp.cube_index, detection_likelihood(ROOM, fp.cube_index, fp.detection_prob, located, alpha))
 
 
@@ -99,9 +99,7 @@ def test_the_search_calls_a_decisive_detection_at_the_far_end_of_its_range_found
     config = SearchConfig()
     at = np.array([CAMERA.translation[0] + 2.6, 1.5, CAMERA.translation[2]])
     belief = TargetBelief(ROOM, facing_sectors=config.facing_sectors)
-    fp = _look(belief)
-    located = located_at_point(ROOM, fp.cube_index, at, depth_sigma_m(2.6, K, 0.12, config.detection_sigma_m))
-    belief.observe(fp.cube_index, detection_likelihood(ROOM, fp.cube_index, fp.detection_prob, located, 1e-7))
+    _detect(belief, at, 1e-7, depth_sigma_m(2.6, K, 0.12, config.detection_sigma_m))
     assert belief.mass_near(at, config.found_radius_m) >= config.found_prob
 
 
