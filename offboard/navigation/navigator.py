@@ -341,11 +341,12 @@ class Navigator:
         across = np.array([-ahead[1], ahead[0]])
         centre = np.array([pose.x_m, pose.y_m]) + ahead * (self._base.radius_m + grid.resolution_m)
         half = grid.resolution_m / 2
-        for t in np.arange(-self._base.radius_m, self._base.radius_m + 1e-9, grid.resolution_m):
-            x, y = centre + t * across
-            region = grid.box_slices(np.array([x - half, y - half, 0.0]), np.array([x + half, y + half, 0.5]))
-            self.occupancy.log_odds[region] = c.clamp_max
-            self.occupancy.observed[region] = True
+        with self.occupancy.edit() as (log_odds, observed):
+            for t in np.arange(-self._base.radius_m, self._base.radius_m + 1e-9, grid.resolution_m):
+                x, y = centre + t * across
+                region = grid.box_slices(np.array([x - half, y - half, 0.0]), np.array([x + half, y + half, 0.5]))
+                log_odds[region] = c.clamp_max
+                observed[region] = True
 
     def _result(self, run: _Run, status: Status, reason: str) -> NavigationResult:
         log.info("navigation to (%.2f, %.2f): %s (%s) after %d steps, %.2f m", *run.goal, status, reason,

@@ -18,6 +18,8 @@ The kernels are numba: a ray walk per point is not something numpy can vectorise
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import cv2
@@ -66,14 +68,40 @@ class OccupancyGrid:
     def __init__(self, grid: VoxelGrid, config: OccupancyConfig = OccupancyConfig()):
         self.grid = grid
         self.config = config
-        self.log_odds = np.zeros(grid.shape, np.float32)
-        self.observed = np.zeros(grid.shape, np.bool_)
+        self._log_odds = np.zeros(grid.shape, np.float32)
+        self._observed = np.zeros(grid.shape, np.bool_)
+        # for coarsened(): per x-y column of cubes, the epoch of its last write; the epoch, one more
+        # at each coarsening, is an array so that shallow copies (the navigator's view) share it
+        self._written = np.zeros(grid.shape[:2], np.int64)
+        self._epoch = np.zeros(1, np.int64)
+        self._coarse: dict[int, tuple] = {}  # factor -> (first epoch not pooled yet, the coarse grid)
         n = grid.num_cubes
         self._hit_value = np.zeros(n, np.float32)
         self._hit_stamp = np.zeros(n, np.int32)
         self._touch_stamp = np.zeros(n, np.int32)
         self._touched = np.zeros(n, np.int64)
         self._frame = 0
+
+    # --- the maps ----------------------------------------------------------------------------------
+
+    @property
+    def log_odds(self) -> np.ndarray:
+        """Log-odds per cube (float32), read-only: write through :meth:`edit`."""
+        return _read_only(self._log_odds)
+
+    @property
+    def observed(self) -> np.ndarray:
+        """Whether each cube was ever updated (bool), read-only: write through :meth:`edit`."""
+        return _read_only(self._observed)
+
+    @contextmanager
+    def edit(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """The writable ``(log_odds, observed)`` maps, for writes other than stereo (a bumper's
+        contact, a restored checkpoint, a test's scene); :meth:`coarsened` then pools them all again."""
+        try:
+            yield self._log_odds, self._observed
+        finally:
+            self._written[:] = self._epoch[0]
 
     # --- update ------------------------------------------------------------------------------------
 
@@ -89,9 +117,9 @@ class OccupancyGrid:
         translation = (camera_in_world.translation - self.grid.origin) / self.grid.resolution_m
         self._frame += 1
         return int(_integrate_frame(
-            self.log_odds.reshape(-1), self.observed.reshape(-1), self._hit_value, self._hit_stamp,
-            self._touch_stamp, self._touched, self._frame, u[keep], v[keep], d[keep], camera,
-            np.ascontiguousarray(rotation), translation, np.array(self.grid.shape, np.int64),
+            self._log_odds.reshape(-1), self._observed.reshape(-1), self._written.reshape(-1), self._epoch[0],
+            self._hit_value, self._hit_stamp, self._touch_stamp, self._touched, self._frame, u[keep], v[keep],
+            d[keep], camera, np.ascontiguousarray(rotation), translation, np.array(self.grid.shape, np.int64),
             c.hit_scale, c.max_hit_per_frame, c.miss_log_odds, c.clamp_min, c.clamp_max))
 
     def integrate_disparity(self, disparity: np.ndarray, intrinsics: Intrinsics, baseline_m: float,
@@ -107,12 +135,12 @@ class OccupancyGrid:
     def state(self) -> np.ndarray:
         """Three-valued occupancy per cube: UNKNOWN, FREE or OCCUPIED (uint8)."""
         out = np.full(self.grid.shape, UNKNOWN, np.uint8)
-        out[self.observed & (self.log_odds <= self.config.free_log_odds)] = FREE
-        out[self.observed & (self.log_odds >= self.config.occupied_log_odds)] = OCCUPIED
+        out[self._observed & (self._log_odds <= self.config.free_log_odds)] = FREE
+        out[self._observed & (self._log_odds >= self.config.occupied_log_odds)] = OCCUPIED
         return out
 
     def occupied(self) -> np.ndarray:
-        return self.log_odds >= self.config.occupied_log_odds
+        return self._log_odds >= self.config.occupied_log_odds
 
     def seen_empty(self, max_log_odds: float, margin_cubes: int = 0, resting: bool = False) -> np.ndarray:
         """Cubes observed at or below ``max_log_odds`` that cannot hold a target's centre, given its
@@ -126,7 +154,7 @@ class OccupancyGrid:
           height). A support top is a cube not seen empty (a surface, or unknown space that may be
           one) under a cube seen empty, or the floor. Open space beside a wall or under the ceiling
           is empty; space just above a table, a shelf or the floor is kept."""
-        empty = self.observed & (self.log_odds <= max_log_odds)
+        empty = self._observed & (self._log_odds <= max_log_odds)
         if margin_cubes <= 0:
             return empty
         if resting:
@@ -151,20 +179,32 @@ class OccupancyGrid:
         if origins.shape[0] == 1 and dirs.shape[0] > 1:
             origins = np.ascontiguousarray(np.broadcast_to(origins, dirs.shape))
         c = self.config
-        dist, hit, unknown = _cast_rays(self.log_odds, self.observed, origins, dirs,
+        dist, hit, unknown = _cast_rays(self._log_odds, self._observed, origins, dirs,
                                         max_range_m / self.grid.resolution_m, c.occupied_log_odds,
                                         c.free_log_odds, stop_at_unknown)
         return RayHits(dist * self.grid.resolution_m, hit, unknown)
 
     def coarsened(self, factor: int) -> OccupancyGrid:
         """The same map in cubes ``factor`` times larger: a block is as occupied as its most occupied
-        observed cube and observed if any cube is. Ray casts on it take ``factor`` times fewer steps."""
+        observed cube and observed if any cube is. Ray casts on it take ``factor`` times fewer steps.
+
+        The planner asks at every decision, and a look changes only part of the map: the blocks are
+        kept per factor, and only those over a column written since are pooled again. So the result
+        is one grid per factor, shared and brought up to date by each call (a new grid would cost
+        more than the pooling): use it before the next call."""
         if factor <= 1:
             return self
-        shape = tuple(-(-n // factor) for n in self.grid.shape)
-        coarse = OccupancyGrid(VoxelGrid(tuple(n * factor * self.grid.resolution_m for n in shape),
-                                         self.grid.resolution_m * factor, self.grid.origin_m), self.config)
-        _max_pool(self.log_odds, self.observed, factor, coarse.log_odds, coarse.observed)
+        if factor not in self._coarse:
+            shape = tuple(-(-n // factor) for n in self.grid.shape)
+            grid = VoxelGrid(tuple(n * factor * self.grid.resolution_m for n in shape),
+                             self.grid.resolution_m * factor, self.grid.origin_m)
+            self._coarse[factor] = (0, OccupancyGrid(grid))
+        since, coarse = self._coarse[factor]
+        _max_pool(self._log_odds, self._observed, factor, self._written, since, coarse._log_odds, coarse._observed)
+        epoch = self._epoch[0]
+        self._coarse[factor] = (epoch + 1, coarse)
+        self._epoch[0] = epoch + 1  # later writes are newer than this pooling
+        coarse.config = self.config  # a view of these maps (copy.copy) may have another
         return coarse
 
     def floor_map(self, robot_radius_m: float, robot_height_m: float, floor_clearance_m: float = 0.1) -> FloorMap:
@@ -175,7 +215,7 @@ class OccupancyGrid:
         k1 = min(int(math.ceil(robot_height_m / res)), self.grid.shape[2])
         band = slice(k0, k1)
         occupied = self.occupied()[:, :, band].any(axis=2)
-        unknown = ~self.observed[:, :, band].any(axis=2)
+        unknown = ~self._observed[:, :, band].any(axis=2)
         radius_cells = int(math.ceil(robot_radius_m / res))
         disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_cells + 1, 2 * radius_cells + 1))
         padded = np.pad(occupied, radius_cells, constant_values=True)  # the walls bound the room
@@ -183,19 +223,48 @@ class OccupancyGrid:
         return FloorMap(res, occupied, blocked.astype(bool), unknown)
 
 
+def _read_only(array: np.ndarray) -> np.ndarray:
+    view = array.view()
+    view.flags.writeable = False
+    return view
+
+
 # --- kernels ---------------------------------------------------------------------------------------
 
 @numba.njit(cache=True)
-def _max_pool(log_odds, observed, factor, out_log_odds, out_observed):
+def _max_pool(log_odds, observed, factor, written, since, out_log_odds, out_observed):
+    """Pool each block of ``factor``³ cubes into its coarse cube (unobserved: log-odds 0), for the
+    coarse columns over a fine column ``written`` at epoch ``since`` or later; the others are kept.
+    A block's fine columns are first folded into one column of fine cubes, with a select rather than
+    a branch and no index arithmetic, so that the innermost loop, along memory, vectorises; only
+    then are runs of ``factor`` cubes along z folded."""
     nx, ny, nz = log_odds.shape
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(nz):
-                if observed[i, j, k]:
-                    a, b, c = i // factor, j // factor, k // factor
-                    if not out_observed[a, b, c] or log_odds[i, j, k] > out_log_odds[a, b, c]:
-                        out_log_odds[a, b, c] = log_odds[i, j, k]
-                    out_observed[a, b, c] = True
+    best = np.empty(nz, np.float32)  # per fine z: the block's largest observed log-odds so far
+    seen = np.empty(nz, np.bool_)
+    for a in range(out_log_odds.shape[0]):
+        i0, i1 = a * factor, min((a + 1) * factor, nx)
+        for b in range(out_log_odds.shape[1]):
+            j0, j1 = b * factor, min((b + 1) * factor, ny)
+            if written[i0:i1, j0:j1].max() < since:
+                continue
+            best[:] = -np.inf
+            seen[:] = False
+            for i in range(i0, i1):
+                for j in range(j0, j1):
+                    column, column_observed = log_odds[i, j], observed[i, j]
+                    for k in range(nz):
+                        value = column[k] if column_observed[k] else np.float32(-np.inf)
+                        best[k] = value if value > best[k] else best[k]
+                        seen[k] |= column_observed[k]
+            for c in range(out_log_odds.shape[2]):
+                k0, k1 = c * factor, min((c + 1) * factor, nz)
+                value, any_seen = best[k0], seen[k0]
+                for k in range(k0 + 1, k1):
+                    value = best[k] if best[k] > value else value
+                    any_seen |= seen[k]
+                out_log_odds[a, b, c] = value if any_seen else np.float32(0.0)
+                out_observed[a, b, c] = any_seen
+
 
 @numba.njit(cache=True)
 def _flat(i, j, k, shape):
@@ -223,8 +292,8 @@ def _to_cubes(u, v, d, camera, rotation, translation):
 
 
 @numba.njit(cache=True)
-def _integrate_frame(log_odds, observed, hit_value, hit_stamp, touch_stamp, touched, frame, u, v, d,
-                     camera, rotation, translation, shape, hit_scale, max_hit, miss, clamp_min, clamp_max):
+def _integrate_frame(log_odds, observed, written, epoch, hit_value, hit_stamp, touch_stamp, touched, frame,
+                     u, v, d, camera, rotation, translation, shape, hit_scale, max_hit, miss, clamp_min, clamp_max):
     n_touched = 0
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
@@ -259,6 +328,7 @@ def _integrate_frame(log_odds, observed, hit_value, hit_stamp, touch_stamp, touc
         value = log_odds[c] + (hit_value[c] if hit_stamp[c] == frame else miss)
         log_odds[c] = min(max(value, clamp_min), clamp_max)
         observed[c] = True
+        written[c // shape[2]] = epoch  # its x-y column, for coarsened()
     return n_touched
 
 

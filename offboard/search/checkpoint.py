@@ -189,7 +189,8 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
     belief, odds, observed = decode_maps(checkpoint)
     try:
         search.belief.restore(belief)
-        search.occupancy.log_odds[:], search.occupancy.observed[:] = odds, observed
+        with search.occupancy.edit() as (log_odds, was_observed):
+            log_odds[:], was_observed[:] = odds, observed
         search.tracker.restore(part["tracker"])
     except (ValueError, KeyError) as exc:
         raise CheckpointError(str(checkpoint.path), None, f"does not fit this search: {exc}") from None

@@ -116,7 +116,8 @@ def test_scan_from_disparity_projects_a_wall_to_the_floor():
 
 def test_map_field_uses_occupied_columns_and_walls():
     occupancy = OccupancyGrid(VoxelGrid((9.0, 5.0, 2.5), RES))
-    occupancy.log_odds[80:82, 50:52, 5:20] = 2.0  # a post at (4.05, 2.55), 0.25-1.0 m high
+    with occupancy.edit() as (log_odds, _):
+        log_odds[80:82, 50:52, 5:20] = 2.0  # a post at (4.05, 2.55), 0.25-1.0 m high
     field = map_field(occupancy)
     on_post, on_wall, free = field.at(np.array([[4.05, 2.55], [0.0, 1.0], [2.0, 1.0]]))
     assert on_post > -0.2 and on_wall > -0.2 and free < -2.0  # the wall lies between two cell centres

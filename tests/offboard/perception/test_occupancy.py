@@ -116,6 +116,44 @@ def test_a_coarsened_map_keeps_obstacles_and_what_was_observed():
     assert rays.distance_m[0] == pytest.approx(2.0, abs=0.25)
 
 
+def _pooled(occ: OccupancyGrid, factor: int) -> tuple[np.ndarray, np.ndarray]:
+    """coarsened() from its definition, in numpy: per block, the largest observed log-odds (0 where
+    no cube is observed) and whether any cube is observed."""
+    pad = [(0, -n % factor) for n in occ.grid.shape]
+    values = np.pad(np.where(occ.observed, occ.log_odds, -np.inf), pad, constant_values=-np.inf)
+    blocks = [n // factor for n in values.shape]
+    shape = (blocks[0], factor, blocks[1], factor, blocks[2], factor)
+    observed = np.pad(occ.observed, pad).reshape(shape).any(axis=(1, 3, 5))
+    return np.where(observed, values.reshape(shape).max(axis=(1, 3, 5)), 0).astype(np.float32), observed
+
+
+def test_a_coarsened_map_follows_frames_and_direct_writes_between_calls():
+    rng = np.random.default_rng(7)
+    occ = OccupancyGrid(ROOM)
+    rows, cols = np.mgrid[0:K.height_px, 0:K.width_px]
+    for step in range(12):
+        if step % 4 == 3:  # written directly, as the navigator marks a contact: in the last frame's view
+            ahead = cam.translation + cam.rotation[:, 2]
+            region = ROOM.box_slices(ahead - 0.2, ahead + 0.2)
+            with occ.edit() as (log_odds, observed):
+                if step % 8 == 3:
+                    log_odds[region] = rng.uniform(-2.0, 3.5)
+                else:
+                    observed[region] = ~observed[region]
+        else:  # a frame of a wavy surface 1-4 m ahead, from anywhere in the room
+            pose = Pose2D(*rng.uniform((0.5, 0.5, -math.pi), (5.5, 3.5, math.pi)))
+            cam = MOUNT.camera_in_world(pose, rng.uniform(-0.6, 0.6), rng.uniform(-0.5, 0.2))
+            waves = np.sin(cols / rng.uniform(20, 150)) * np.cos(rows / rng.uniform(20, 150))
+            depth = rng.uniform(1.0, 4.0) + 0.5 * waves
+            occ.integrate_disparity((K.fx_px * MOUNT.baseline_m / depth).astype(np.float32), K, MOUNT.baseline_m, cam)
+        for factor in (2, 3):
+            coarse = occ.coarsened(factor)
+            log_odds, observed = _pooled(occ, factor)
+            assert np.array_equal(coarse.log_odds, log_odds) and np.array_equal(coarse.observed, observed)
+    with pytest.raises(ValueError):  # written through edit() only: coarsened() must know
+        occ.log_odds[0, 0, 0] = 1.0
+
+
 def test_seen_empty_keeps_a_margin_around_surfaces_unknown_space_and_the_room():
     occ = OccupancyGrid(ROOM)
     cam = _facing_east()
@@ -129,5 +167,6 @@ def test_seen_empty_keeps_a_margin_around_surfaces_unknown_space_and_the_room():
     assert kept[i_wall - 10, j, k]  # open air in front of it: empty
     assert not kept[:, :, :3].any() and not kept[:3].any()  # the floor, the room's boundary
     assert not (kept & ~plain).any()  # a margin only ever keeps more
-    occ.observed[i_wall - 10, j + 2, k] = False  # unknown space two cubes beside it: kept
+    with occ.edit() as (_, observed):
+        observed[i_wall - 10, j + 2, k] = False  # unknown space two cubes beside it: kept
     assert not occ.seen_empty(-0.8, margin_cubes=3)[i_wall - 10, j, k]

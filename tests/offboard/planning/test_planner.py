@@ -215,8 +215,9 @@ def test_where_the_belief_has_gathered_occlusion_is_judged_along_the_ray_to_it()
     target = HintBox((3.45, 1.9, 1.15), (3.55, 2.0, 1.25), 0.9)
     occ = OccupancyGrid(ROOM)
     post = ROOM.box_slices(np.array([2.45, 1.8, 0.8]), np.array([2.55, 1.9, 1.6]))  # just beside the line
-    occ.log_odds[post] = 5.0
-    occ.observed[:] = True
+    with occ.edit() as (log_odds, observed):
+        log_odds[post] = 5.0
+        observed[:] = True
     pose = Pose2D(1.0, 1.95, 0.0)
     planner = _planner(3, boxes=(target,), table=DetectabilityTable.nominal())
     best = planner.decide(pose, 0.0, 0.0, 0.0, occ, _paths(planner, pose)).values.detection_prob[-1].max()

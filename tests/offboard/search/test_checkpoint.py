@@ -39,9 +39,10 @@ def _looked_at(seed: int) -> tuple[TargetBelief, OccupancyGrid]:
         belief.update_after_miss(seen, b)
     belief.rule_out_empty(rng.uniform(size=GRID.shape) < 0.2, 0.05)
     occupancy = OccupancyGrid(GRID)
-    occupancy.log_odds.flat[rng.choice(GRID.num_cubes, 300)] = rng.uniform(-2, 3.5, 300).astype(np.float32)
-    occupancy.observed[occupancy.log_odds != 0] = True
-    occupancy.observed.flat[:40] = True  # observed, log-odds back at exactly 0
+    with occupancy.edit() as (log_odds, observed):
+        log_odds.flat[rng.choice(GRID.num_cubes, 300)] = rng.uniform(-2, 3.5, 300).astype(np.float32)
+        observed[log_odds != 0] = True
+        observed.flat[:40] = True  # observed, log-odds back at exactly 0
     return belief, occupancy
 
 

@@ -16,10 +16,11 @@ def test_a_target_seen_through_on_a_table_keeps_its_centre_and_the_open_air_abov
     config = SearchConfig()
     grid = VoxelGrid((4.0, 4.0, 2.5), config.resolution_m)
     occupancy = OccupancyGrid(grid)
-    occupancy.observed[:] = True
-    occupancy.log_odds[:] = config.empty_log_odds  # seen through everywhere, the target's own cubes too
     top = grid.index_of([1.0, 1.0, 0.72]), grid.index_of([2.0, 2.0, 0.72])
-    occupancy.log_odds[top[0][0]:top[1][0] + 1, top[0][1]:top[1][1] + 1, top[0][2]] = 1.0  # a table top at 0.72 m
+    with occupancy.edit() as (log_odds, observed):
+        observed[:] = True
+        log_odds[:] = config.empty_log_odds  # seen through everywhere, the target's own cubes too
+        log_odds[top[0][0]:top[1][0] + 1, top[0][1]:top[1][1] + 1, top[0][2]] = 1.0  # a table top at 0.72 m
     empty = seen_empty(occupancy, config)
     centre = grid.index_of([1.5, 1.5, 0.72 + TARGET_HALF_M])
     assert not empty[tuple(centre)]
@@ -33,11 +34,12 @@ def test_a_resting_target_needs_something_to_stand_on_within_its_half_size():
     assert config.resting_target  # the default
     grid = VoxelGrid((4.0, 4.0, 2.5), config.resolution_m)
     occupancy = OccupancyGrid(grid)
-    occupancy.observed[:] = True
-    occupancy.log_odds[:] = config.empty_log_odds
-    occupancy.log_odds[grid.index_of([3.98, 0.0, 0.0])[0]:] = 1.0  # a wall at x = 3.95 m, floor to ceiling
     low, high = grid.index_of([0.5, 2.5, 0.0]), grid.index_of([1.0, 3.0, 0.5])
-    occupancy.observed[low[0]:high[0] + 1, low[1]:high[1] + 1, :high[2] + 1] = False  # unknown up to 0.5 m
+    with occupancy.edit() as (log_odds, observed):
+        observed[:] = True
+        log_odds[:] = config.empty_log_odds
+        log_odds[grid.index_of([3.98, 0.0, 0.0])[0]:] = 1.0  # a wall at x = 3.95 m, floor to ceiling
+        observed[low[0]:high[0] + 1, low[1]:high[1] + 1, :high[2] + 1] = False  # unknown up to 0.5 m
     resting = seen_empty(occupancy, config)
     anywhere = seen_empty(occupancy, replace(config, resting_target=False))
 
