@@ -123,3 +123,17 @@ def bin_index(edges: np.ndarray, value: float) -> int:
     """Bin of ``value`` among evenly spaced ``edges``; -1 outside them."""
     i = int(math.floor((value - edges[0]) / (edges[1] - edges[0])))
     return i if 0 <= i < edges.shape[0] - 1 else -1
+
+
+@numba.njit(cache=True, inline="always")
+def cosine_bin(cos_edges: np.ndarray, cosine: float) -> int:
+    """Bin of the angle whose cosine is ``cosine`` (in [-1, 1]) among angle edges in [0°, 180°],
+    given as their cosines (``cos_edges``, decreasing); -1 outside them. The same bin as
+    :func:`bin_index` of the angle, without the arc cosine: kernels that bin millions of angles
+    spend most of their time there."""
+    if cosine > cos_edges[0] or cosine <= cos_edges[-1]:
+        return -1
+    i = 0
+    while cosine <= cos_edges[i + 1]:
+        i += 1
+    return i

@@ -26,7 +26,7 @@ import numba
 import numpy as np
 
 from offboard.planning.belief import TargetBelief
-from offboard.perception.detectability import DetectabilityTable, bin_index, facing_angle
+from offboard.perception.detectability import DetectabilityTable, bin_index, cosine_bin
 from offboard.planning.sensed_sphere import SensedSpheres, SphereBins
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 
@@ -79,62 +79,92 @@ def block_centers(belief: TargetBelief) -> np.ndarray:
 
 
 class ActionGeometry:
-    """Where every coarse block lies as seen from each camera position, computed once.
+    """Where every coarse block lies as seen from camera positions, one row per position.
 
-    Candidate positions are fixed floor-grid vertices, so distances, bins and off-axis angles of the
-    blocks from them never change; only the belief's masses and the sensed spheres' radii do. With
-    this cache, scoring every action is a gather-multiply-add.
+    Distances, bins and off-axis angles of the blocks from a position never change; only the
+    belief's masses and the sensed spheres' radii do. With them computed once, scoring every action
+    is a gather-multiply-add. Rows can be re-placed at new positions (:meth:`place`), so a cache
+    can reuse its memory instead of allocating and stacking per decision.
     """
 
     def __init__(self, belief: TargetBelief, positions_m: np.ndarray, settings: CameraSettings,
-                 mount: HeadMount, intrinsics: Intrinsics, table: DetectabilityTable, bins: SphereBins):
-        self.positions_m = np.atleast_2d(np.asarray(positions_m, np.float64))
-        self.centers_m = np.column_stack([self.positions_m[:, :2], np.full(len(self.positions_m), mount.height_m)])
+                 mount: HeadMount, intrinsics: Intrinsics, table: DetectabilityTable, bins: SphereBins,
+                 capacity: int = 0):
+        """Rows for ``positions_m`` (P, 2), computed now, and ``capacity`` rows in all (at least P)."""
+        positions_m = np.asarray(positions_m, np.float64).reshape(-1, 2)
+        rows = max(capacity, len(positions_m))
+        self._blocks_m = block_centers(belief)
+        n_blk, n_set, n_fac = len(self._blocks_m), len(settings), belief.facing_sectors
+        self.positions_m = np.full((rows, 2), np.nan)
+        self.distance_m = np.empty((rows, n_blk), np.float32)
+        self.sphere_bin = np.empty((rows, n_blk), np.int32)
+        self.distance_bin = np.empty((rows, n_blk), np.int16)
+        self.facing_bin = np.empty((rows, n_blk, n_fac), np.int8)
+        self.off_axis_bin = np.empty((rows, n_blk, n_set), np.int8)
         near, far = table.range_m
-        geometry = np.array([bins.el_min_rad, bins.el_max_rad, near, far,
-                             math.tan(intrinsics.hfov_rad / 2), math.tan(intrinsics.vfov_rad / 2)])
-        self.distance_m, self.sphere_bin, self.distance_bin, self.facing_bin, self.off_axis_bin = _geometry(
-            block_centers(belief), self.centers_m, geometry, bins.el_count, bins.az_count,
-            np.ascontiguousarray(settings.rotations(mount)), table.distance_edges_m, table.off_axis_edges_deg,
-            table.facing_edges_deg, belief.facing_azimuths_rad)
+        self._view = np.array([bins.el_min_rad, bins.el_max_rad, near, far,
+                               math.tan(intrinsics.hfov_rad / 2), math.tan(intrinsics.vfov_rad / 2)])
+        self._bin_counts = (bins.el_count, bins.az_count)
+        self._rotations = np.ascontiguousarray(settings.rotations(mount))
+        facings = belief.facing_azimuths_rad
+        self._facing_xy = np.column_stack([np.cos(facings), np.sin(facings)])  # NaN: faces the camera
+        self._cos_edges = tuple(np.cos(np.radians(e)) for e in (table.off_axis_edges_deg, table.facing_edges_deg))
+        self.height_m = mount.height_m
         self.block_margin_m = 0.5 * belief.coarse_factor * belief.grid.resolution_m
         self.table = table
+        self.place(np.arange(len(positions_m)), positions_m)
 
-    @classmethod
-    def stack(cls, parts: list[ActionGeometry]) -> ActionGeometry:
-        """One geometry of the positions of ``parts``, in order."""
-        whole = object.__new__(cls)
-        for name in ("positions_m", "centers_m", "distance_m", "sphere_bin", "distance_bin", "facing_bin",
-                     "off_axis_bin"):
-            setattr(whole, name, np.concatenate([getattr(p, name) for p in parts]))
-        whole.block_margin_m, whole.table = parts[0].block_margin_m, parts[0].table
-        return whole
+    def place(self, rows: np.ndarray, positions_m: np.ndarray) -> None:
+        """Recompute ``rows`` for the camera at ``positions_m`` (R, 2)."""
+        rows = np.asarray(rows, np.int64)
+        if not len(rows):
+            return
+        self.positions_m[rows] = positions_m
+        centers = np.column_stack([positions_m, np.full(len(rows), self.height_m)])
+        t = self.table
+        _geometry(self._blocks_m, centers, rows, self._view, *self._bin_counts, self._rotations, t.distance_edges_m,
+                  *self._cos_edges, self._facing_xy, self.distance_m, self.sphere_bin, self.distance_bin,
+                  self.facing_bin, self.off_axis_bin)
 
 
 class GeometryCache:
-    """Action geometries of single positions, kept by lattice node: candidates come and go between
-    decisions, but each is placed on the lattice, so its geometry is computed once (least recently
-    used ones are dropped beyond ``capacity``)."""
+    """Action geometries of candidate positions, kept by lattice node in the rows of one
+    :class:`ActionGeometry`: candidates come and go between decisions, but each is placed on the
+    lattice, so its geometry is computed once (the least recently used row is reused beyond
+    ``capacity``)."""
 
     def __init__(self, belief: TargetBelief, settings: CameraSettings, mount: HeadMount, intrinsics: Intrinsics,
                  table: DetectabilityTable, bins: SphereBins, lattice_m: float, capacity: int = 256):
-        self._make = lambda xy: ActionGeometry(belief, xy[None], settings, mount, intrinsics, table, bins)
+        self.geometry = ActionGeometry(belief, np.zeros((0, 2)), settings, mount, intrinsics, table, bins, capacity)
         self.lattice_m = lattice_m
-        self.capacity = capacity
-        self._cache: dict[tuple[int, int], ActionGeometry] = {}
+        self._rows: dict[tuple[int, int], int] = {}  # lattice node → row; the dict's order is the recency
 
-    def rows(self, positions_m: np.ndarray) -> ActionGeometry:
-        parts = []
-        for xy in np.asarray(positions_m, np.float64):
-            key = tuple(int(v) for v in np.round(xy / self.lattice_m))
-            part = self._cache.pop(key, None)  # re-inserted below: the dict's order is the recency
-            if part is None or not np.allclose(part.positions_m[0], xy):
-                part = self._make(xy)
-            self._cache[key] = part
-            parts.append(part)
-        while len(self._cache) > self.capacity:
-            del self._cache[next(iter(self._cache))]
-        return ActionGeometry.stack(parts)
+    def rows(self, positions_m: np.ndarray) -> np.ndarray:
+        """The rows of :attr:`geometry` holding ``positions_m`` (P, 2), computing those not held; P
+        must not exceed the capacity."""
+        positions_m = np.asarray(positions_m, np.float64).reshape(-1, 2)
+        keys = [tuple(int(v) for v in np.round(xy / self.lattice_m)) for xy in positions_m]
+        wanted = set(keys)
+        if len(wanted) > len(self.geometry.positions_m):
+            raise ValueError(f"{len(wanted)} candidate positions do not fit a geometry cache of "
+                             f"{len(self.geometry.positions_m)}")
+        # rows never used first, then those of the least recently used positions not wanted now
+        free = iter(list(range(len(self._rows), len(self.geometry.positions_m)))
+                    + [r for k, r in self._rows.items() if k not in wanted])
+        rows, missing = np.empty(len(keys), np.int64), []
+        for i, (key, xy) in enumerate(zip(keys, positions_m)):
+            row = self._rows.pop(key, None)
+            if row is None or not np.allclose(self.geometry.positions_m[row], xy):
+                row = row if row is not None else next(free)
+                missing.append(i)
+            self._rows[key] = rows[i] = row
+        self._drop_rows_reused(set(rows[missing].tolist()), wanted)
+        self.geometry.place(rows[missing], positions_m[missing])
+        return rows
+
+    def _drop_rows_reused(self, reused: set[int], wanted: set[tuple[int, int]]) -> None:
+        for key in [k for k, r in self._rows.items() if r in reused and k not in wanted]:
+            del self._rows[key]
 
 
 def heavy_blocks(belief: TargetBelief, share: float = 1e-3, most: int = 64) -> np.ndarray:
@@ -148,9 +178,10 @@ def heavy_blocks(belief: TargetBelief, share: float = 1e-3, most: int = 64) -> n
 
 
 def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSpheres,
-             behind_surface_m: float = 0.0, heavy: np.ndarray | None = None) -> ActionValues:
+             behind_surface_m: float = 0.0, heavy: np.ndarray | None = None,
+             rows: np.ndarray | None = None) -> ActionValues:
     """Expected detection probability of every (position, setting), covering probability of every
-    position; ``spheres`` are the positions' sensed spheres, in the geometry's order. A block counts
+    position: the geometry's ``rows`` (default: all), whose sensed spheres ``spheres`` are, in that order. A block counts
     up to half a block plus ``behind_surface_m`` beyond its direction's sphere radius (the target's
     centre lies behind the face a look sees, as :func:`~offboard.planning.detection_function.look_footprint`
     counts it), plus the cube size of the map the spheres were cast on: its occupied cubes begin up
@@ -159,12 +190,13 @@ def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSphe
     on the dev suite), whose mass sits just behind the surface. ``heavy`` (T,): blocks whose
     occlusion is read from ``spheres.toward_m`` (cast toward their centres, in that order) instead."""
     mass = np.ascontiguousarray(belief.coarse_mass().reshape(-1, belief.facing_sectors))
-    radius = spheres.radius_m.reshape(len(geometry.positions_m), -1)
+    rows = np.arange(len(geometry.positions_m)) if rows is None else np.asarray(rows, np.int64)
+    radius = spheres.radius_m.reshape(len(rows), -1)
     slot = np.full(len(mass), -1, np.int32)
     if heavy is not None:
         slot[np.asarray(heavy, np.int64)] = np.arange(len(heavy), dtype=np.int32)
     rate = np.ascontiguousarray(geometry.table.rate)
-    detection, covering = _score(mass, geometry.distance_m, geometry.sphere_bin, geometry.distance_bin,
+    detection, covering = _score(mass, rows, geometry.distance_m, geometry.sphere_bin, geometry.distance_bin,
                                  geometry.facing_bin, geometry.off_axis_bin, np.ascontiguousarray(radius),
                                  slot, np.ascontiguousarray(spheres.toward_m, np.float64),
                                  geometry.block_margin_m + behind_surface_m + spheres.resolution_m, rate)
@@ -172,21 +204,26 @@ def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSphe
 
 
 @numba.njit(cache=True, parallel=True)
-def _geometry(centers, positions, geometry, n_el, n_az, rotations, d_edges, o_edges, f_edges, facings):
-    """Per position and block: distance, sphere bin (-1 out of reach), distance bin, facing bins,
-    off-axis bin per setting (-1 outside the view)."""
+def _geometry(centers, positions, rows, geometry, n_el, n_az, rotations, d_edges, o_cos, f_cos, facing_xy,
+              distance, sphere_bin, distance_bin, facing_bin, off_axis_bin):
+    """Fill ``rows`` of the geometry arrays for the camera at ``positions`` (R, 3): per block,
+    distance, sphere bin (-1 out of reach), distance bin, facing bins, off-axis bin per setting (-1
+    outside the view). Angles are binned by their cosines (``o_cos``, ``f_cos``: the edges'); a
+    facing's cosine is that of :func:`~offboard.perception.detectability.facing_angle`, the face's
+    normal ``facing_xy`` dotted with the unit ray back to the camera."""
     el_min, el_max, inner, outer, tan_h, tan_v = geometry
-    n_pos, n_blk, n_set, n_fac = positions.shape[0], centers.shape[0], rotations.shape[0], facings.shape[0]
-    distance = np.full((n_pos, n_blk), np.inf, np.float32)
-    sphere_bin = np.full((n_pos, n_blk), -1, np.int32)
-    distance_bin = np.full((n_pos, n_blk), -1, np.int16)
-    facing_bin = np.full((n_pos, n_blk, n_fac), -1, np.int8)
-    off_axis_bin = np.full((n_pos, n_blk, n_set), -1, np.int8)
-    for p in numba.prange(n_pos):
+    n_blk, n_set, n_fac = centers.shape[0], rotations.shape[0], facing_xy.shape[0]
+    for q in numba.prange(rows.shape[0]):
+        p = rows[q]
+        distance[p, :] = np.inf
+        sphere_bin[p, :] = -1
+        distance_bin[p, :] = -1
+        facing_bin[p, :, :] = -1
+        off_axis_bin[p, :, :] = -1
         for c in range(n_blk):
-            wx = centers[c, 0] - positions[p, 0]
-            wy = centers[c, 1] - positions[p, 1]
-            wz = centers[c, 2] - positions[p, 2]
+            wx = centers[c, 0] - positions[q, 0]
+            wy = centers[c, 1] - positions[q, 1]
+            wz = centers[c, 2] - positions[q, 2]
             dist = math.sqrt(wx * wx + wy * wy + wz * wz)
             if dist < inner or dist > outer:
                 continue
@@ -197,44 +234,45 @@ def _geometry(centers, positions, geometry, n_el, n_az, rotations, d_edges, o_ed
             distance[p, c] = dist
             sphere_bin[p, c] = ei * n_az + ai
             distance_bin[p, c] = bin_index(d_edges, dist)
-            back = math.atan2(-wy, -wx)
-            cos_el = math.hypot(wx, wy) / dist
             for s in range(n_fac):
-                diff = facing_angle(facings[s], back, cos_el)
-                facing_bin[p, c, s] = bin_index(f_edges, math.degrees(diff))
+                fx, fy = facing_xy[s, 0], facing_xy[s, 1]
+                cosine = 1.0 if math.isnan(fx) else -(fx * wx + fy * wy) / dist
+                facing_bin[p, c, s] = cosine_bin(f_cos, max(-1.0, min(1.0, cosine)))
             for a in range(n_set):
                 r = rotations[a]
                 x = r[0, 0] * wx + r[1, 0] * wy + r[2, 0] * wz
                 y = r[0, 1] * wx + r[1, 1] * wy + r[2, 1] * wz
                 z = r[0, 2] * wx + r[1, 2] * wy + r[2, 2] * wz
                 if z > 0.0 and abs(x) <= tan_h * z and abs(y) <= tan_v * z:
-                    off_axis_bin[p, c, a] = bin_index(o_edges, math.degrees(math.acos(min(z / dist, 1.0))))
-    return distance, sphere_bin, distance_bin, facing_bin, off_axis_bin
+                    off_axis_bin[p, c, a] = cosine_bin(o_cos, max(-1.0, min(z / dist, 1.0)))
 
 
 @numba.njit(cache=True, parallel=True)
-def _score(mass, distance, sphere_bin, distance_bin, facing_bin, off_axis_bin, radius, slot, toward, margin, rate):
-    n_pos, n_blk = distance.shape
+def _score(mass, rows, distance, sphere_bin, distance_bin, facing_bin, off_axis_bin, radius, slot, toward, margin,
+           rate):
+    """Per row of ``rows`` (a position), the expected detection of each setting and the covering."""
+    n_pos, n_blk = rows.shape[0], distance.shape[1]
     n_set, n_fac = off_axis_bin.shape[2], mass.shape[1]
     detection = np.zeros((n_pos, n_set))
     covering = np.zeros(n_pos)
     best = np.zeros((n_pos, n_fac))  # per position: best detectability of the block at hand, per facing
     for p in numba.prange(n_pos):
+        g = rows[p]  # the position's row in the geometry
         for c in range(n_blk):
-            sb, db = sphere_bin[p, c], distance_bin[p, c]
+            sb, db = sphere_bin[g, c], distance_bin[g, c]
             if sb < 0 or db < 0:
                 continue  # out of reach
             reach = radius[p, sb] if slot[c] < 0 else toward[p, slot[c]]
-            if distance[p, c] > reach + margin:
+            if distance[g, c] > reach + margin:
                 continue  # behind the first obstacle in that direction
             best[p, :] = 0.0
             for a in range(n_set):
-                ob = off_axis_bin[p, c, a]
+                ob = off_axis_bin[g, c, a]
                 if ob < 0:
                     continue
                 value = 0.0
                 for s in range(n_fac):
-                    fb = facing_bin[p, c, s]
+                    fb = facing_bin[g, c, s]
                     if fb >= 0:
                         b = rate[db, ob, fb]
                         value += mass[c, s] * b

@@ -45,7 +45,7 @@ from offboard.planning.action_values import (ActionGeometry, ActionValues, Camer
 from offboard.planning.belief import TargetBelief
 from offboard.planning.sensed_sphere import SphereBins, sensed_spheres
 from offboard.planning.time_model import TimeModel
-from offboard.planning.viewpoints import aimed_viewpoints, best_distance_m, grid_vertices
+from offboard.planning.viewpoints import AimedViewpoints, best_distance_m, grid_vertices
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 from shared.strict import bounds
 
@@ -104,8 +104,10 @@ class SearchPlanner:
         self.vertices = grid_vertices(belief.grid.size_m, config.grid_spacing_m)
         self.positions = self.vertices  # the candidates of the coming decision (see plan_positions)
         self._geometry = GeometryCache(belief, self.settings, mount, intrinsics, table, self.bins,
-                                       config.viewpoint_lattice_m)
+                                       config.viewpoint_lattice_m, max(256, config.max_vertices + config.viewpoints))
+        self._here = ActionGeometry(belief, np.zeros((1, 2)), self.settings, mount, intrinsics, table, self.bins)
         self._blocks_m = block_centers(belief)
+        self._aimed: AimedViewpoints | None = None
 
     @property
     def action_count(self) -> int:
@@ -116,10 +118,11 @@ class SearchPlanner:
         and viewpoints aimed at the belief that the base can stand on (``floor``, ``margin_m`` from
         the walls). Returns them (also kept as :attr:`positions`)."""
         near = np.argsort(np.hypot(*(self.vertices - (pose.x_m, pose.y_m)).T))[:self.config.max_vertices]
-        aimed = aimed_viewpoints(self._blocks_m, self.belief.coarse_mass().reshape(len(self._blocks_m), -1),
-                                 self.belief.facing_azimuths_rad, best_distance_m(self.table), self.mount.height_m,
-                                 self.belief.grid.size_m, margin_m, self.config.viewpoint_lattice_m,
-                                 self.config.viewpoints)
+        if self._aimed is None or self._aimed.margin_m != margin_m:
+            self._aimed = AimedViewpoints(self._blocks_m, self.belief.facing_azimuths_rad, best_distance_m(self.table),
+                                          self.mount.height_m, self.belief.grid.size_m, margin_m,
+                                          self.config.viewpoint_lattice_m)
+        aimed = self._aimed.propose(self.belief.coarse_mass().reshape(len(self._blocks_m), -1), self.config.viewpoints)
         cells = np.clip(np.floor(aimed / floor.resolution_m).astype(int), 0, np.array(floor.blocked.shape) - 1)
         aimed = aimed[~floor.blocked[cells[:, 0], cells[:, 1]]] if len(aimed) else aimed
         self.positions = np.vstack([self.vertices[np.sort(near)], aimed])
@@ -217,16 +220,18 @@ class SearchPlanner:
     def _values(self, pose: Pose2D, occupancy: OccupancyGrid) -> ActionValues:
         near, far = self.table.range_m
         here = np.array([[pose.x_m, pose.y_m]])
-        geometries = (self._geometry.rows(self.positions), ActionGeometry(self.belief, here, self.settings, self.mount,
-                                                                          self.intrinsics, self.table, self.bins))
+        self._here.place(np.zeros(1, np.int64), here)
+        parts = ((self._geometry.geometry, self._geometry.rows(self.positions), self.positions),
+                 (self._here, None, here))
         factor = max(1, round(self.config.sphere_resolution_m / occupancy.grid.resolution_m))
         coarse = occupancy.coarsened(factor)
         heavy = heavy_blocks(self.belief)
         rows = []
-        for geometry in geometries:
-            spheres = sensed_spheres(coarse, geometry.centers_m, self.bins, near, far, self.config.unknown_is_opaque,
+        for geometry, which, positions in parts:
+            centers = np.column_stack([positions, np.full(len(positions), self.mount.height_m)])
+            spheres = sensed_spheres(coarse, centers, self.bins, near, far, self.config.unknown_is_opaque,
                                      self._blocks_m[heavy])
-            rows.append(evaluate(geometry, self.belief, spheres, self.config.behind_surface_m, heavy))
+            rows.append(evaluate(geometry, self.belief, spheres, self.config.behind_surface_m, heavy, which))
         return ActionValues(np.vstack([r.detection_prob for r in rows]),
                             np.concatenate([r.covering_prob for r in rows]))
 

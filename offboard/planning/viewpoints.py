@@ -33,31 +33,39 @@ def best_distance_m(table: DetectabilityTable, within: float = 0.05) -> float:
     return float((table.distance_edges_m[good[0]] + table.distance_edges_m[good[-1] + 1]) / 2)
 
 
-def aimed_viewpoints(block_centers_m: np.ndarray, mass: np.ndarray, facing_azimuths_rad: np.ndarray,
-                     distance_m: float, head_height_m: float, room_size_m: tuple[float, float, float],
-                     margin_m: float, lattice_m: float, count: int) -> np.ndarray:
-    """Up to ``count`` floor positions (k, 2) in front of where the most mass is.
+class AimedViewpoints:
+    """Floor positions in front of where the most target probability is.
 
-    ``block_centers_m`` (B, 3) and ``mass`` (B, F): target probability per block and facing sector;
-    ``facing_azimuths_rad`` (F,), NaN for a target that faces the camera (then eight directions
-    share its mass). Every block and facing votes, with its mass, for the lattice node ``distance_m``
-    from it (horizontally less, by the height difference to the camera) along the facing; nodes
-    within ``margin_m`` of a wall get no votes.
+    Every block and facing votes, with its mass, for the lattice node ``distance_m`` from it
+    (horizontally less, by the height difference to the camera) along the facing; nodes within
+    ``margin_m`` of a wall get no votes. Where each vote goes depends only on the room, so it is
+    worked out once; a decision only weighs the votes by the belief of the moment.
     """
-    if count <= 0 or not mass.size or mass.max() <= 0:
-        return np.zeros((0, 2))
-    directions, shares = _directions(facing_azimuths_rad)  # (F, D, 2), (F, D)
-    rise = block_centers_m[:, 2] - head_height_m
-    reach = np.sqrt(np.maximum(distance_m**2 - rise**2, (0.5 * distance_m) ** 2))  # (B,)
-    points = block_centers_m[:, None, None, :2] + directions[None] * reach[:, None, None, None]  # (B, F, D, 2)
-    votes = (mass[:, :, None] * shares[None]).ravel()
-    nodes = np.round(points.reshape(-1, 2) / lattice_m).astype(np.int64)
-    lo = np.ceil(margin_m / lattice_m)
-    hi = np.floor((np.array(room_size_m[:2]) - margin_m) / lattice_m)
-    keep = np.all((nodes >= lo) & (nodes <= hi), axis=1) & (votes > 0)
-    shape = hi.astype(np.int64) + 1
-    totals = np.bincount(np.ravel_multi_index(nodes[keep].T, shape), weights=votes[keep], minlength=int(np.prod(shape)))
-    return _strongest_apart(totals.reshape(shape), count) * lattice_m
+
+    def __init__(self, block_centers_m: np.ndarray, facing_azimuths_rad: np.ndarray, distance_m: float,
+                 head_height_m: float, room_size_m: tuple[float, float, float], margin_m: float, lattice_m: float):
+        """``block_centers_m`` (B, 3); ``facing_azimuths_rad`` (F,), NaN for a target that faces the
+        camera (then eight directions share its mass)."""
+        directions, self._shares = _directions(facing_azimuths_rad)  # (F, D, 2), (F, D)
+        rise = block_centers_m[:, 2] - head_height_m
+        reach = np.sqrt(np.maximum(distance_m**2 - rise**2, (0.5 * distance_m) ** 2))  # (B,)
+        points = block_centers_m[:, None, None, :2] + directions[None] * reach[:, None, None, None]  # (B, F, D, 2)
+        nodes = np.round(points.reshape(-1, 2) / lattice_m).astype(np.int64)
+        lo = np.ceil(margin_m / lattice_m)
+        hi = np.floor((np.array(room_size_m[:2]) - margin_m) / lattice_m)
+        self._shape = tuple(int(n) for n in hi.astype(np.int64) + 1)
+        self._keep = np.all((nodes >= lo) & (nodes <= hi), axis=1)
+        self._node = np.ravel_multi_index(nodes[self._keep].T, self._shape)
+        self.lattice_m, self.margin_m = lattice_m, margin_m
+
+    def propose(self, mass: np.ndarray, count: int) -> np.ndarray:
+        """Up to ``count`` positions (k, 2), the most voted for first, more than one lattice step
+        apart; ``mass`` (B, F): target probability per block and facing sector."""
+        if count <= 0 or not mass.size or mass.max() <= 0:
+            return np.zeros((0, 2))
+        votes = (mass[:, :, None] * self._shares[None]).ravel()[self._keep]
+        totals = np.bincount(self._node, weights=votes, minlength=int(np.prod(self._shape)))
+        return _strongest_apart(totals.reshape(self._shape), count) * self.lattice_m
 
 
 def _directions(facing_azimuths_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

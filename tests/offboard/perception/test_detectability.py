@@ -55,3 +55,15 @@ def test_the_search_loads_the_shipped_table_unless_given_one(tmp_path):
     nominal.save(tmp_path / "mine.json")
     given = detectability_table("sift", _NoDetector(), {"sift": tmp_path / "mine.json"})
     assert np.array_equal(given.rate, nominal.rate)
+
+
+@pytest.mark.parametrize("edges_deg", [np.arange(0.0, 91.0, 10.0), np.linspace(0.0, 45.0, 10), np.arange(20.0, 61.0, 5.0)])
+def test_binning_an_angle_by_its_cosine_gives_its_bin(edges_deg):
+    from offboard.perception.detectability import bin_index, cosine_bin
+
+    angles = np.concatenate([np.linspace(0.0, 180.0, 3601), edges_deg[1:-1] + 1e-6, edges_deg[1:-1] - 1e-6])
+    cos_edges = np.cos(np.radians(edges_deg))
+    got = [cosine_bin(cos_edges, float(np.cos(np.radians(a)))) for a in angles]
+    want = [bin_index(edges_deg, float(a)) for a in angles]
+    assert got == want
+    assert cosine_bin(cos_edges, 1.0) == (0 if edges_deg[0] == 0 else -1)  # head-on: the first bin, if it has 0°

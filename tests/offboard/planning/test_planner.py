@@ -184,14 +184,14 @@ def test_cost_1_moves_carry_their_setting_and_never_to_where_the_robot_stands():
 
 
 def test_viewpoints_are_aimed_at_the_unseen_facing_of_a_mass():
-    from offboard.planning.viewpoints import aimed_viewpoints
+    from offboard.planning.viewpoints import AimedViewpoints
 
     blocks = np.array([[4.0, 2.0, 1.0], [1.0, 1.0, 1.0]])
     mass = np.zeros((2, 8))
     mass[0, 2] = 0.9  # the first block's mass faces +y (sector 2 of 8 is 90°)
     mass[1, 0] = 0.1
     facings = np.arange(8) * (2 * math.pi / 8)
-    points = aimed_viewpoints(blocks, mass, facings, 1.2, 1.2, (6.0, 4.0, 2.5), 0.3, 0.25, 2)
+    points = AimedViewpoints(blocks, facings, 1.2, 1.2, (6.0, 4.0, 2.5), 0.3, 0.25).propose(mass, 2)
     assert points.shape == (2, 2)
     np.testing.assert_allclose(points[0], (4.0, 3.25), atol=0.13)  # straight in front of its face, 1.2 m
     np.testing.assert_allclose(points[1], (2.25, 1.0), atol=0.13)
@@ -237,3 +237,22 @@ def test_travel_is_costed_at_the_navigators_measured_rate():
     assert decisions[0.0].kind == "move", decisions[0.0].reason
     assert decisions[15.0].kind == "look", decisions[15.0].reason
     assert TIME.travel_s(2.0, 0.0) < replace(TIME, drive_s_per_m=15.0).travel_s(2.0, 0.0) == pytest.approx(30.0)
+
+
+def test_the_geometry_cache_holds_each_candidate_as_computed_afresh_as_candidates_come_and_go():
+    from offboard.planning.action_values import ActionGeometry, CameraSettings, GeometryCache
+    from offboard.planning.sensed_sphere import SphereBins
+
+    belief = TargetBelief(ROOM, coarse_factor=4)
+    parts = (CameraSettings.from_fov(K), HeadMount(), K, DetectabilityTable.nominal(), SphereBins())
+    cache = GeometryCache(belief, *parts, lattice_m=0.25, capacity=5)
+    a, b, c, d, e, f, g = (np.array([x, 1.0]) for x in (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5))
+    # more positions over the calls than the cache holds; some kept from the call before, one twice in a call
+    for positions in ([a, b, c, d], [e, a], [f, g, b, f], [a, c, e, g], [d, b]):
+        positions = np.array(positions)
+        rows = cache.rows(positions)
+        fresh = ActionGeometry(belief, positions, *parts)
+        for name in ("distance_m", "sphere_bin", "distance_bin", "facing_bin", "off_axis_bin"):
+            assert np.array_equal(getattr(cache.geometry, name)[rows], getattr(fresh, name)), name
+    with pytest.raises(ValueError, match="do not fit"):
+        cache.rows(np.arange(12).reshape(6, 2) * 0.25)
