@@ -322,9 +322,11 @@ class _Workers:
 
     def __init__(self, jobs: int, log_dir: Path):
         self.lock, self.stopping = threading.Lock(), False
-        # the runs share the cores: one numba thread per worker when there are as many workers as cores
+        # the runs share the cores: one numba and one OpenCV thread per worker (and its agent) when there
+        # are as many workers as cores; else one run's stereo takes every core while another plans
         threads = str(max(1, (os.cpu_count() or 1) // max(jobs, 1)))
-        self.env = {**os.environ, "NUMBA_NUM_THREADS": threads, "OMP_NUM_THREADS": threads}
+        self.env = {**os.environ, "NUMBA_NUM_THREADS": threads, "OMP_NUM_THREADS": threads,
+                    "OPENCV_FOR_THREADS_NUM": threads}
         self.log_dir = log_dir
         self.idle: queue.Queue[int] = queue.Queue()
         for index in range(jobs):
