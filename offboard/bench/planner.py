@@ -49,7 +49,11 @@ def _scenario(resolution_m: float) -> tuple[SearchPlanner, OccupancyGrid]:
 
 
 def _decide(planner: SearchPlanner, occupancy: OccupancyGrid, pose: Pose2D):
-    """One decision as the search makes it: candidates planned, paths to them, the choice."""
+    """One decision as the search makes it: candidates planned, paths to them, the choice. A search
+    writes a frame before each decision; here the whole map counts as written, the worst case for
+    :meth:`~OccupancyGrid.coarsened`."""
+    with occupancy.edit():
+        pass
     floor = occupancy.floor_map(0.26, 1.35)
     planner.plan_positions(pose, floor, 0.31)
     field = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))

@@ -115,56 +115,54 @@ class ActionGeometry:
         self.place(np.arange(len(positions_m)), positions_m)
 
     def place(self, rows: np.ndarray, positions_m: np.ndarray) -> None:
-        """Recompute ``rows`` for the camera at ``positions_m`` (R, 2)."""
+        """Recompute ``rows`` (distinct) for the camera at ``positions_m`` (R, 2)."""
         rows = np.asarray(rows, np.int64)
         if not len(rows):
             return
         self.positions_m[rows] = positions_m
-        centers = np.column_stack([positions_m, np.full(len(rows), self.height_m)])
+        cameras = np.column_stack([positions_m, np.full(len(rows), self.height_m)])
         t = self.table
-        _geometry(self._blocks_m, centers, rows, self._view, *self._bin_counts, self._rotations, t.distance_edges_m,
+        _geometry(self._blocks_m, cameras, rows, self._view, *self._bin_counts, self._rotations, t.distance_edges_m,
                   *self._cos_edges, self._facing_xy, self.distance_m, self.sphere_bin, self.distance_bin,
                   self.facing_bin, self.off_axis_bin)
 
 
 class GeometryCache:
-    """Action geometries of candidate positions, kept by lattice node in the rows of one
-    :class:`ActionGeometry`: candidates come and go between decisions, but each is placed on the
-    lattice, so its geometry is computed once (the least recently used row is reused beyond
+    """Action geometries of candidate positions, kept by position in the rows of one
+    :class:`ActionGeometry`: candidates come and go between decisions, but they stand on a lattice,
+    so each one's geometry is computed once (the least recently used row is reused beyond
     ``capacity``)."""
 
     def __init__(self, belief: TargetBelief, settings: CameraSettings, mount: HeadMount, intrinsics: Intrinsics,
-                 table: DetectabilityTable, bins: SphereBins, lattice_m: float, capacity: int = 256):
+                 table: DetectabilityTable, bins: SphereBins, capacity: int = 256):
         self.geometry = ActionGeometry(belief, np.zeros((0, 2)), settings, mount, intrinsics, table, bins, capacity)
-        self.lattice_m = lattice_m
-        self._rows: dict[tuple[int, int], int] = {}  # lattice node → row; the dict's order is the recency
+        self._rows: dict[tuple[float, float], int] = {}  # position → row; the dict's order is the recency
 
     def rows(self, positions_m: np.ndarray) -> np.ndarray:
-        """The rows of :attr:`geometry` holding ``positions_m`` (P, 2), computing those not held; P
-        must not exceed the capacity."""
+        """The rows of :attr:`geometry` holding ``positions_m`` (P, 2), computing those not held; the
+        distinct positions must fit the capacity."""
         positions_m = np.asarray(positions_m, np.float64).reshape(-1, 2)
-        keys = [tuple(int(v) for v in np.round(xy / self.lattice_m)) for xy in positions_m]
+        keys = [(round(float(x), 6), round(float(y), 6)) for x, y in positions_m]
         wanted = set(keys)
-        if len(wanted) > len(self.geometry.positions_m):
-            raise ValueError(f"{len(wanted)} candidate positions do not fit a geometry cache of "
-                             f"{len(self.geometry.positions_m)}")
+        capacity = len(self.geometry.positions_m)
+        if len(wanted) > capacity:
+            raise ValueError(f"{len(wanted)} candidate positions do not fit a geometry cache of {capacity}")
         # rows never used first, then those of the least recently used positions not wanted now
-        free = iter(list(range(len(self._rows), len(self.geometry.positions_m)))
-                    + [r for k, r in self._rows.items() if k not in wanted])
-        rows, missing = np.empty(len(keys), np.int64), []
-        for i, (key, xy) in enumerate(zip(keys, positions_m)):
-            row = self._rows.pop(key, None)
-            if row is None or not np.allclose(self.geometry.positions_m[row], xy):
-                row = row if row is not None else next(free)
-                missing.append(i)
-            self._rows[key] = rows[i] = row
-        self._drop_rows_reused(set(rows[missing].tolist()), wanted)
-        self.geometry.place(rows[missing], positions_m[missing])
-        return rows
-
-    def _drop_rows_reused(self, reused: set[int], wanted: set[tuple[int, int]]) -> None:
-        for key in [k for k, r in self._rows.items() if r in reused and k not in wanted]:
-            del self._rows[key]
+        free = iter([(None, r) for r in range(len(self._rows), capacity)]
+                    + [(k, r) for k, r in self._rows.items() if k not in wanted])
+        placed: dict[int, np.ndarray] = {}
+        for key, xy in zip(keys, positions_m):
+            if key in self._rows:
+                self._rows[key] = self._rows.pop(key)  # now the most recently used
+                continue
+            old, row = next(free)
+            if old is not None:
+                del self._rows[old]
+            self._rows[key] = row
+            placed[row] = xy
+        self.geometry.place(np.fromiter(placed, np.int64, len(placed)),
+                            np.array(list(placed.values())).reshape(-1, 2))
+        return np.array([self._rows[k] for k in keys], np.int64)
 
 
 def heavy_blocks(belief: TargetBelief, share: float = 1e-3, most: int = 64) -> np.ndarray:
@@ -177,11 +175,11 @@ def heavy_blocks(belief: TargetBelief, share: float = 1e-3, most: int = 64) -> n
     return order[mass[order] >= share]
 
 
-def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSpheres,
-             behind_surface_m: float = 0.0, heavy: np.ndarray | None = None,
-             rows: np.ndarray | None = None) -> ActionValues:
+def evaluate(geometry: ActionGeometry, rows: np.ndarray, belief: TargetBelief, spheres: SensedSpheres,
+             behind_surface_m: float = 0.0, heavy: np.ndarray | None = None) -> ActionValues:
     """Expected detection probability of every (position, setting), covering probability of every
-    position: the geometry's ``rows`` (default: all), whose sensed spheres ``spheres`` are, in that order. A block counts
+    position, for the positions in ``rows`` of the geometry; ``spheres`` are their sensed spheres,
+    in the same order. A block counts
     up to half a block plus ``behind_surface_m`` beyond its direction's sphere radius (the target's
     centre lies behind the face a look sees, as :func:`~offboard.planning.detection_function.look_footprint`
     counts it), plus the cube size of the map the spheres were cast on: its occupied cubes begin up
@@ -190,7 +188,7 @@ def evaluate(geometry: ActionGeometry, belief: TargetBelief, spheres: SensedSphe
     on the dev suite), whose mass sits just behind the surface. ``heavy`` (T,): blocks whose
     occlusion is read from ``spheres.toward_m`` (cast toward their centres, in that order) instead."""
     mass = np.ascontiguousarray(belief.coarse_mass().reshape(-1, belief.facing_sectors))
-    rows = np.arange(len(geometry.positions_m)) if rows is None else np.asarray(rows, np.int64)
+    rows = np.asarray(rows, np.int64)
     radius = spheres.radius_m.reshape(len(rows), -1)
     slot = np.full(len(mass), -1, np.int32)
     if heavy is not None:

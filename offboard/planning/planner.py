@@ -104,7 +104,7 @@ class SearchPlanner:
         self.vertices = grid_vertices(belief.grid.size_m, config.grid_spacing_m)
         self.positions = self.vertices  # the candidates of the coming decision (see plan_positions)
         self._geometry = GeometryCache(belief, self.settings, mount, intrinsics, table, self.bins,
-                                       config.viewpoint_lattice_m, max(256, config.max_vertices + config.viewpoints))
+                                       max(256, config.max_vertices + config.viewpoints))
         self._here = ActionGeometry(belief, np.zeros((1, 2)), self.settings, mount, intrinsics, table, self.bins)
         self._blocks_m = block_centers(belief)
         self._aimed: AimedViewpoints | None = None
@@ -222,7 +222,7 @@ class SearchPlanner:
         here = np.array([[pose.x_m, pose.y_m]])
         self._here.place(np.zeros(1, np.int64), here)
         parts = ((self._geometry.geometry, self._geometry.rows(self.positions), self.positions),
-                 (self._here, None, here))
+                 (self._here, np.zeros(1, np.int64), here))
         factor = max(1, round(self.config.sphere_resolution_m / occupancy.grid.resolution_m))
         coarse = occupancy.coarsened(factor)
         heavy = heavy_blocks(self.belief)
@@ -231,7 +231,7 @@ class SearchPlanner:
             centers = np.column_stack([positions, np.full(len(positions), self.mount.height_m)])
             spheres = sensed_spheres(coarse, centers, self.bins, near, far, self.config.unknown_is_opaque,
                                      self._blocks_m[heavy])
-            rows.append(evaluate(geometry, self.belief, spheres, self.config.behind_surface_m, heavy, which))
+            rows.append(evaluate(geometry, which, self.belief, spheres, self.config.behind_surface_m, heavy))
         return ActionValues(np.vstack([r.detection_prob for r in rows]),
                             np.concatenate([r.covering_prob for r in rows]))
 

@@ -64,6 +64,7 @@ class AimedViewpoints:
         if count <= 0 or not mass.size or mass.max() <= 0:
             return np.zeros((0, 2))
         votes = (mass[:, :, None] * self._shares[None]).ravel()[self._keep]
+        votes = np.where(votes > 0, votes, 0.0)  # a block's mass, kept incrementally, may drift just below 0
         totals = np.bincount(self._node, weights=votes, minlength=int(np.prod(self._shape)))
         return _strongest_apart(totals.reshape(self._shape), count) * self.lattice_m
 

@@ -245,10 +245,11 @@ def test_the_geometry_cache_holds_each_candidate_as_computed_afresh_as_candidate
 
     belief = TargetBelief(ROOM, coarse_factor=4)
     parts = (CameraSettings.from_fov(K), HeadMount(), K, DetectabilityTable.nominal(), SphereBins())
-    cache = GeometryCache(belief, *parts, lattice_m=0.25, capacity=5)
+    cache = GeometryCache(belief, *parts, capacity=5)
     a, b, c, d, e, f, g = (np.array([x, 1.0]) for x in (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5))
-    # more positions over the calls than the cache holds; some kept from the call before, one twice in a call
-    for positions in ([a, b, c, d], [e, a], [f, g, b, f], [a, c, e, g], [d, b]):
+    # more positions over the calls than the cache holds; some kept from the call before, one twice in a
+    # call, and two a lattice of 0.25 m would put on one node
+    for positions in ([a, b, c, d], [e, a], [f, g, b, f], [a, c, e, g], [d, b], [a, a + 0.1, b]):
         positions = np.array(positions)
         rows = cache.rows(positions)
         fresh = ActionGeometry(belief, positions, *parts)
