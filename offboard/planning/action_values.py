@@ -114,15 +114,18 @@ class ActionGeometry:
         self.table = table
         self.place(np.arange(len(positions_m)), positions_m)
 
+    def cameras_m(self, rows: np.ndarray) -> np.ndarray:
+        """Where the camera is (R, 3) for each of ``rows``: its position at the head's height."""
+        return np.column_stack([self.positions_m[rows], np.full(len(rows), self.height_m)])
+
     def place(self, rows: np.ndarray, positions_m: np.ndarray) -> None:
         """Recompute ``rows`` (distinct) for the camera at ``positions_m`` (R, 2)."""
         rows = np.asarray(rows, np.int64)
         if not len(rows):
             return
         self.positions_m[rows] = positions_m
-        cameras = np.column_stack([positions_m, np.full(len(rows), self.height_m)])
         t = self.table
-        _geometry(self._blocks_m, cameras, rows, self._view, *self._bin_counts, self._rotations, t.distance_edges_m,
+        _geometry(self._blocks_m, self.cameras_m(rows), rows, self._view, *self._bin_counts, self._rotations, t.distance_edges_m,
                   *self._cos_edges, self._facing_xy, self.distance_m, self.sphere_bin, self.distance_bin,
                   self.facing_bin, self.off_axis_bin)
 
@@ -179,10 +182,9 @@ def evaluate(geometry: ActionGeometry, rows: np.ndarray, belief: TargetBelief, s
              behind_surface_m: float = 0.0, heavy: np.ndarray | None = None) -> ActionValues:
     """Expected detection probability of every (position, setting), covering probability of every
     position, for the positions in ``rows`` of the geometry; ``spheres`` are their sensed spheres,
-    in the same order. A block counts
-    up to half a block plus ``behind_surface_m`` beyond its direction's sphere radius (the target's
-    centre lies behind the face a look sees, as :func:`~offboard.planning.detection_function.look_footprint`
-    counts it), plus the cube size of the map the spheres were cast on: its occupied cubes begin up
+    in the same order. A block counts up to half a block plus ``behind_surface_m`` beyond its
+    direction's sphere radius (the target's centre lies behind the face a look sees, as
+    :func:`~offboard.planning.detection_function.look_footprint` counts it), plus the cube size of the map the spheres were cast on: its occupied cubes begin up
     to that much before the surface the real look's stereo depth will see. Without it the planner
     underestimated its looks at a target already detected once (expected 0.39 against 0.51 realised
     on the dev suite), whose mass sits just behind the surface. ``heavy`` (T,): blocks whose

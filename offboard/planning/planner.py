@@ -219,18 +219,16 @@ class SearchPlanner:
 
     def _values(self, pose: Pose2D, occupancy: OccupancyGrid) -> ActionValues:
         near, far = self.table.range_m
-        here = np.array([[pose.x_m, pose.y_m]])
-        self._here.place(np.zeros(1, np.int64), here)
-        parts = ((self._geometry.geometry, self._geometry.rows(self.positions), self.positions),
-                 (self._here, np.zeros(1, np.int64), here))
+        here_row = np.zeros(1, np.int64)
+        self._here.place(here_row, np.array([[pose.x_m, pose.y_m]]))
+        parts = ((self._geometry.geometry, self._geometry.rows(self.positions)), (self._here, here_row))
         factor = max(1, round(self.config.sphere_resolution_m / occupancy.grid.resolution_m))
         coarse = occupancy.coarsened(factor)
         heavy = heavy_blocks(self.belief)
         rows = []
-        for geometry, which, positions in parts:
-            centers = np.column_stack([positions, np.full(len(positions), self.mount.height_m)])
-            spheres = sensed_spheres(coarse, centers, self.bins, near, far, self.config.unknown_is_opaque,
-                                     self._blocks_m[heavy])
+        for geometry, which in parts:
+            spheres = sensed_spheres(coarse, geometry.cameras_m(which), self.bins, near, far,
+                                     self.config.unknown_is_opaque, self._blocks_m[heavy])
             rows.append(evaluate(geometry, which, self.belief, spheres, self.config.behind_surface_m, heavy))
         return ActionValues(np.vstack([r.detection_prob for r in rows]),
                             np.concatenate([r.covering_prob for r in rows]))
