@@ -157,10 +157,9 @@ class SearchPlanner:
         far_t = self._candidate_times(pose, path_lengths_m)
         best_anywhere = max(here_detection.max(), np.where(np.isfinite(far_t), values.detection_prob[:-1], 0).max())
         if best_anywhere < self.config.min_detection_prob:
-            # a robot the map boxes in must not read as a room searched through: say which it is
-            boxed_in = "" if np.isfinite(far_t).any() else "; no other position is reachable on the map"
             return Decision("stop", f"no reachable action finds the target with probability ≥ "
-                                    f"{self.config.min_detection_prob:g}{boxed_in}", status="exhausted",
+                                    f"{self.config.min_detection_prob:g}"
+                                    + self._unreachable_worth(values, path_lengths_m, pose), status="exhausted",
                             covering_here=here_covering, values=values)
         if self.config.cost_function == 1:
             decision = self._eq9(values, look_t, far_t, here_covering, pose)
@@ -253,6 +252,17 @@ class SearchPlanner:
                         self.settings.azimuth_rad[s], self.settings.tilt_rad[s], None, float(detection[s]),
                         float(utility[s]), float(look_t[s]), covering_here=covering, values=values, setting=s)
 
+    def _unreachable_worth(self, values: ActionValues, dist: np.ndarray, pose: Pose2D) -> str:
+        """Why the search ran out, if the map is the reason: a robot boxed in (by furniture, or by a
+        stereo phantom the inflation turned into a wall) must not read as a room searched through."""
+        elsewhere = self._away(pose)
+        reachable = np.isfinite(np.asarray(dist, float)) & elsewhere
+        best = values.detection_prob[:-1][~reachable & elsewhere].max(initial=0.0)
+        if best < self.config.min_detection_prob:
+            return ""
+        return (f"; {int(reachable.sum())} of {int(elsewhere.sum())} positions are reachable on the map, "
+                f"and an unreachable one would find the target with probability {best:.3f}")
+
     def _eq9(self, values: ActionValues, look_t: np.ndarray, far_t: np.ndarray, covering: float,
              pose: Pose2D) -> Decision:
         """Cost 1: the largest detection probability among all reachable actions, wherever they are
@@ -277,8 +287,9 @@ class SearchPlanner:
         dist = np.asarray(path_lengths_m, float)
         usable = np.isfinite(dist) & self._away(pose) & (values.detection_prob[:-1].max(axis=1) >= self.config.min_detection_prob)
         if not usable.any():
-            return Decision("stop", "no reachable position left whose looks are worth taking",
-                            status="exhausted", covering_here=covering, values=values)
+            return Decision("stop", "no reachable position left whose looks are worth taking"
+                            + self._unreachable_worth(values, dist, pose), status="exhausted",
+                            covering_here=covering, values=values)
         cover = values.covering_prob[:-1]
         if (usable & worth).any():
             usable = usable & worth

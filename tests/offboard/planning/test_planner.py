@@ -128,7 +128,24 @@ def test_stops_when_the_budget_is_spent_or_nothing_is_left():
     assert d.kind == "stop" and d.status == "exhausted" and "reachable on the map" not in d.reason
     boxed_in = _planner(3)  # the mass is far away and the map shows no way there
     d = boxed_in.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), np.full(len(boxed_in.positions), np.inf))
-    assert d.status == "exhausted" and d.reason.endswith("no other position is reachable on the map")
+    others = int(np.sum(np.hypot(*(boxed_in.positions - (START.x_m, START.y_m)).T) > 0.5))
+    assert d.status == "exhausted" and f"; 0 of {others} positions are reachable on the map, and an unreachable one " \
+        "would find the target with probability 0." in d.reason, d.reason
+
+
+def test_a_search_boxed_in_by_its_map_says_so_where_positions_near_it_are_reachable():
+    # all the mass is at A; the map lets the robot reach only the positions within 1.2 m of it,
+    # which cannot see A: the search stops, and says that it is the map, not the room, that ran out
+    planner = _planner(3, boxes=(replace(A_BOX, weight=1.0),))
+    paths = _paths(planner, START)
+    near = paths < 1.2
+    paths[~near] = np.inf
+    d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), paths)
+    reachable = int(np.sum(near & (paths > 0.5)))
+    assert d.kind == "stop" and d.status == "exhausted"
+    found = re.search(rf"; {reachable} of \d+ positions are reachable on the map, and an unreachable one would "
+                      r"find the target with probability (0\.\d+)$", d.reason)
+    assert found and float(found.group(1)) > 0.1, d.reason
 
 
 def test_unreachable_positions_are_never_chosen():
