@@ -243,12 +243,20 @@ def scope(rows: list[dict]) -> str:
 
 
 def _worlds_text(worlds: dict) -> str:
-    """World names, a suite's worlds (``test/room-2000-3``) counted under the suite's name when several."""
+    """World names; when several share a suite (``test/room-2000-3``) or, for world files given by
+    path, a folder, they are counted under its name."""
     groups: dict[str, list[str]] = {}
     for name in worlds:
-        groups.setdefault(name.split("/")[0] if "/" in name else name, []).append(name)
-    return ", ".join(f"the {key} suite ({len(names)} worlds)" if len(names) > 1 else names[0]
-                     for key, names in groups.items())
+        groups.setdefault(name.rpartition("/")[0] or name, []).append(name)
+    return ", ".join(_group_text(key, names) for key, names in groups.items())
+
+
+def _group_text(key: str, names: list[str]) -> str:
+    if len(names) == 1:
+        return names[0]
+    if names[0].endswith(".toml"):
+        return f"{len(names)} world files in {key}"
+    return f"the {key} suite ({len(names)} worlds)"
 
 
 def _stats(name: str, rows: list[dict]) -> MethodStats:

@@ -176,3 +176,10 @@ def test_a_suites_worlds_are_named_by_the_suite():
     rows = [{"world": w, "seed": s, "start": "0,0,0", "target": t} for w, s, t in
             (("test/room-1", 0.0, "a"), ("test/room-2", 1.0, "a"), ("office", 0.0, "b"), ("office", 0.0, "c"))]
     assert scope(rows) == "the test suite (2 worlds), office; seeds 0,1; 4 start × target scenarios"
+
+
+def test_world_files_given_by_path_are_counted_under_their_folder():
+    rows = [{"world": w, "seed": 0.0, "start": "0,0,0", "target": "a"} for w in
+            ("/data/rooms/room-1.toml", "/data/rooms/room-2.toml", "/data/other.toml", "paper-lab")]
+    assert scope(rows) == ("2 world files in /data/rooms, /data/other.toml, paper-lab; seeds 0; "
+                           "4 start × target scenarios")
