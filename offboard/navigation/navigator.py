@@ -97,6 +97,7 @@ class _Run:
     matches: tuple[int, int]  # accepted, tried before the run
     wall_start_s: float  # wall clock at the start, and time spent waiting for the robot before it
     waiting_start_s: float
+    squeeze: bool  # planned on the bare radius (Navigator.floor_map)
     distance_m: float = 0.0
     steps: int = 0
     stalls: int = 0
@@ -135,8 +136,17 @@ class Navigator:
         step = self.config.bug.step_m
         return (float(self._base.drive_time_s(step)) + self._capture_s) / step
 
-    def floor_map(self) -> FloorMap:
-        return self.occupancy.floor_map(self._base.radius_m + self.config.margin_m, self._base.height_m)
+    def floor_map(self, squeeze: bool = False) -> FloorMap:
+        """The columns the base may not enter: obstacles inflated by its radius and ``margin_m``, or with
+        ``squeeze`` by its bare radius. Rounded up to whole cells, and with a mapped cube occupied by any
+        part of an obstacle, the margin can shut on the map a corridor that is wide enough in truth: a
+        robot so boxed in squeezes through on the bare radius. Rounded up (6 cubes of 5 cm for the
+        Pioneer's 0.26 m) that still keeps 0.275 m from a mapped cube's near face; the margin for odometry
+        error is what it gives up, and the bumper is the last line."""
+        return self.occupancy.floor_map(self._clearance_m(squeeze), self._base.height_m)
+
+    def _clearance_m(self, squeeze: bool) -> float:
+        return self._base.radius_m + (0.0 if squeeze else self.config.margin_m)
 
     # --- sensing -----------------------------------------------------------------------------------
 
@@ -173,13 +183,14 @@ class Navigator:
 
     # --- driving -----------------------------------------------------------------------------------
 
-    def go_to(self, goal: Point) -> NavigationResult:
-        """Drive to ``goal`` (world frame, metres); never raises for an unreachable goal."""
+    def go_to(self, goal: Point, squeeze: bool = False) -> NavigationResult:
+        """Drive to ``goal`` (world frame, metres); never raises for an unreachable goal. ``squeeze``:
+        plan the whole run on the bare radius (:meth:`floor_map`)."""
         state = self.robot.state()  # the robot may have been turned or moved since the last call
         self._odom = state.pose.to_pose()
         self.tracker.predict(self._odom)
         run = _Run(goal, state.robot_time_s, state.robot_time_s, (self.matches_accepted, self.matches_tried),
-                   time.perf_counter(), self.waiting_s)
+                   time.perf_counter(), self.waiting_s, squeeze)
         bug = TangentBug(goal, self.config.bug)
         while True:
             verdict = self._verdict(run)
@@ -208,22 +219,22 @@ class Navigator:
         through, and drive as far as the map allows. Whether it found such a route."""
         c = self.config
         here = (self.pose.x_m, self.pose.y_m)
-        path = shortest_path(self._confident_floor_map(), here, run.goal)
+        path = shortest_path(self._confident_floor_map(run.squeeze), here, run.goal)
         if path is None or run.probes >= c.max_probes:
             return False
         run.probes += 1
         run.last_time_s = self.sense(self._pan_toward(path[1]), c.probe_tilt_deg)
-        waypoint = _free_prefix(self.floor_map(), here, path, c.bug.step_m)
+        waypoint = _free_prefix(self.floor_map(run.squeeze), here, path, c.bug.step_m)
         if waypoint is not None and math.dist(here, waypoint) >= c.bug.min_step_m:
             log.debug("probing toward (%.2f, %.2f)", *waypoint)
             self._drive(run, waypoint)
         return True
 
-    def _confident_floor_map(self) -> FloorMap:
+    def _confident_floor_map(self, squeeze: bool) -> FloorMap:
         """The floor map of cubes with strong evidence only (a view of the shared grid, not a copy)."""
         view = copy.copy(self.occupancy)
         view.config = replace(self.occupancy.config, occupied_log_odds=self.config.confident_log_odds)
-        return view.floor_map(self._base.radius_m + self.config.margin_m, self._base.height_m)
+        return view.floor_map(self._clearance_m(squeeze), self._base.height_m)
 
     def _back_again(self, run: _Run) -> bool:
         """Has the robot come back to where an earlier step (not the last) ended?"""
@@ -251,7 +262,7 @@ class Navigator:
         return planned
 
     def _plan(self, run: _Run, bug: TangentBug) -> tuple[Point | None, str]:
-        floor = self.floor_map()
+        floor = self.floor_map(run.squeeze)
         here = (self.pose.x_m, self.pose.y_m)
         nx, ny = floor.blocked.shape
         if not (0.0 <= run.goal[0] < nx * floor.resolution_m and 0.0 <= run.goal[1] < ny * floor.resolution_m):

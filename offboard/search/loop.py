@@ -164,6 +164,7 @@ class Search:
         self._pan_tilt = (math.radians(start.pan_deg), math.radians(start.tilt_deg))
         self._plans_positions = policy is None  # baselines keep the report's fixed grid
         self._pending_processing_s = 0.0  # planning done towards the coming look
+        self._squeeze_to: tuple[float, float] | None = None  # a move chosen on the bare radius (_choose)
         self.on_action: Callable[[Search], None] | None = None  # after every action (the checkpoint)
 
     # --- the loop ------------------------------------------------------------------------------------
@@ -217,8 +218,19 @@ class Search:
         log.info("planner ready in %.0f ms", (time.perf_counter() - started) * 1000.0)
 
     def _choose(self, pose: Pose2D) -> Decision:
-        """The policy's next action from ``pose``, on the current maps."""
-        floor = self.navigator.floor_map()  # the navigator's clearance: a path here is one it drives
+        """The policy's next action from ``pose``, on the current maps. A policy that would stop for want
+        of a reachable position chooses again on the navigator's bare radius (``squeeze``): the margin
+        can shut on the map a way out that is open in truth, and the robot then squeezes through it."""
+        decision = self._choose_on(pose, squeeze=False)
+        if decision.kind == "stop" and decision.status == "exhausted":
+            decision = self._choose_on(pose, squeeze=True)
+            if decision.kind == "move":
+                log.info("boxed in by the navigator's margin: squeezing through on its bare radius")
+                self._squeeze_to = decision.position_m
+        return decision
+
+    def _choose_on(self, pose: Pose2D, squeeze: bool) -> Decision:
+        floor = self.navigator.floor_map(squeeze)  # the navigator's clearance: a path here is one it drives
         if self._plans_positions:
             self.planner.plan_positions(pose, floor, self.info.base.radius_m + 0.05)
         field_m = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
@@ -244,7 +256,8 @@ class Search:
     def _move(self, decision: Decision) -> None:
         goal = decision.position_m
         before = self.robot_time_s()
-        result = self.navigator.go_to(goal)
+        result = self.navigator.go_to(goal, squeeze=goal == self._squeeze_to)
+        self._squeeze_to = None
         motion_s = self.robot_time_s() - before
         self.state.motion_s += motion_s
         self.state.processing_s += result.processing_s

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from conftest import running_agent
 from offboard.bench.navigation import true_floor_map
-from offboard.navigation.grid_planner import path_length_m, shortest_path
+from offboard.navigation.grid_planner import is_free, path_length_m, shortest_path
 from offboard.navigation.navigator import Navigator, retry_busy
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.stereo import StereoConfig
@@ -116,3 +117,20 @@ def test_the_navigator_senses_with_the_stereo_configuration_it_is_given(agent):
         navigator.sense(0.0)
         mapped[name] = int(navigator.occupancy.observed.sum())
     assert mapped["default"] > 1000 and mapped["blind"] == 0, mapped  # no window has that much texture
+
+
+def test_a_gap_the_margin_shuts_on_the_map_is_open_on_the_bare_radius(agent):
+    # a wall across the room at x = 5 m with a gap of 13 cubes (0.65 m): the margin's 7 cubes of
+    # inflation (0.31 m rounded up) shut it, the bare radius's 6 (0.26 m) leave its middle cube open
+    _, robot = agent
+    navigator = Navigator(robot, OccupancyGrid(VoxelGrid((8.0, 6.0, 2.5), 0.05)))
+    with navigator.occupancy.edit() as (log_odds, observed):
+        wall = np.ix_([100], np.r_[0:50, 63:120], np.arange(4, 20))  # 0.2-1.0 m high, but y 2.50-3.15 m
+        log_odds[wall] = navigator.occupancy.config.clamp_max
+        observed[wall] = True
+    west, east = (3.0, 2.825), (7.0, 2.825)
+    assert shortest_path(navigator.floor_map(), west, east) is None
+    assert not is_free(navigator.floor_map(), (5.025, 2.825))
+    squeezed = navigator.floor_map(squeeze=True)
+    assert is_free(squeezed, (5.025, 2.825)) and not is_free(squeezed, (5.025, 2.775))  # one cube wide
+    assert shortest_path(squeezed, west, east) is not None
