@@ -109,3 +109,15 @@ def test_a_world_it_has_never_seen_works_without_changes(tmp_path):
     world.write_text(UNSEEN_WORLD)
     summary, _ = _search(tmp_path, str(world))
     _assert_found_near_truth(summary, world)
+
+
+def test_a_robot_its_map_boxes_in_squeezes_through_and_finds_the_target(tmp_path):
+    # the start's pocket has two ways out that the navigator's margin shuts on the map; before the
+    # search chose again on the bare radius it stopped here as exhausted, 2 of 57 positions reachable
+    world = Path(__file__).parent / "boxed-in-room.toml"
+    config = tmp_path / "fixed.toml"
+    config.write_text("planned_processing_s = 0.45\n")  # the run repeats exactly, however loaded the machine
+    summary, out = _search(tmp_path, str(world), "--start", "0.625,0.625,45", "--target", "0.395,3.19,0.75,0",
+                           extra=("--config", str(config)))
+    assert "squeezing through on its bare radius" in (out / "search.log").read_text()
+    assert summary["found"] and summary["distance_m"] > 2.0, summary
