@@ -72,7 +72,9 @@ def test_a_dropped_serial_link_is_a_device_error_then_the_agent_serves_again():
                 assert wait_until(lambda: isinstance(state(), m.StateReply), 5.0)
                 assert wait_until(lambda: any(t > quiet_since for t in published), 2.0)  # publishing resumed
                 moved = _ask(session, keys.move, m.MoveCommand(next(_ids), distance_m=0.2), m.MoveResult)
-                assert moved.status == "done" and moved.distance_m == pytest.approx(0.2, abs=0.03)
+                # The driver brakes on SIPs 100 ms apart: on a loaded machine one arrives late, and the
+                # base rolls on for up to a period at speed (~3 cm) beyond its 2 cm tolerance.
+                assert moved.status == "done" and moved.distance_m == pytest.approx(0.2, abs=0.05)
         finally:
             stop.set()
             runner.join(timeout=10.0)
