@@ -39,8 +39,28 @@ class Look:
     detected: bool
     processing_s: float
     motion_s: float
-    pose_error_m: float | None = None  # |estimated − true| position, where the log has both
-    heading_error_deg: float | None = None  # |estimated − true| heading, likewise
+    believed: tuple[float, float, float] | None = None  # (x_m, y_m, heading_deg) the robot believed it had
+    truth: tuple[float, float, float] | None = None  # the simulator's, where the harness logged it
+
+    @property
+    def pose_error_m(self) -> float | None:
+        """|believed − true| position."""
+        return None if self.truth is None else math.dist(self.believed[:2], self.truth[:2])
+
+    @property
+    def heading_error_deg(self) -> float | None:
+        return None if self.truth is None else abs(math.remainder(self.believed[2] - self.truth[2], 360.0))
+
+    def shift_at(self, point_xy: tuple[float, float]) -> float | None:
+        """How far the pose error moves a world point: what the camera saw there from the true pose is
+        placed as if seen from the believed one (at 3 m, 1° of heading alone moves it 5 cm)."""
+        if self.truth is None:
+            return None
+        (bx, by, bh), (tx, ty, th) = self.believed, self.truth
+        turn = math.radians(bh - th)
+        dx, dy = point_xy[0] - tx, point_xy[1] - ty
+        placed = (bx + math.cos(turn) * dx - math.sin(turn) * dy, by + math.sin(turn) * dx + math.cos(turn) * dy)
+        return math.dist(placed, point_xy)
 
 
 _FIELDS = {"action": int, "expected_p": float, "realised_p": float, "detected": bool, "processing_s": float,
@@ -77,8 +97,8 @@ def parse_look(text: str, where: str = "look") -> Look:
         for name in _POSE_FIELDS:
             if not _is(data.get(name), float):
                 raise ValueError(f"{where}: {name} = {data.get(name)!r} is not a finite float")
-        values["pose_error_m"] = math.hypot(data["x_m"] - data["true_x_m"], data["y_m"] - data["true_y_m"])
-        values["heading_error_deg"] = abs(math.remainder(data["heading_deg"] - data["true_heading_deg"], 360.0))
+        values["believed"] = (float(data["x_m"]), float(data["y_m"]), float(data["heading_deg"]))
+        values["truth"] = (float(data["true_x_m"]), float(data["true_y_m"]), float(data["true_heading_deg"]))
     return Look(**values)
 
 

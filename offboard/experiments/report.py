@@ -29,6 +29,7 @@ import numpy as np
 
 from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, calibration_md, coverage, coverage_md,
                                               localisation_md, read_looks)
+from offboard.experiments.failures import failures_md, last_true_look
 
 COSTS = (1, 2, 3, 4)
 PRIORS = {"uniform": "No knowledge", "tables": "Knowledge"}
@@ -439,9 +440,11 @@ def _wall_md(rows: list[dict], sweep: tuple[int, float, int] | None = None) -> l
             "Mean per run: " + ", ".join(f"{m} {_fmt(w, 0)} s" for m, w in by_method.items()) + ".", ""]
 
 
-def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks: list[list[Look]] = ()) -> str:
+def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks: list[list[Look]] = (),
+           last_looks: dict[str, Look | None] | None = None) -> str:
     """The report; ``sweep``: (runs, wall seconds, jobs) of the sweep that just ran, if one did; ``looks``:
-    each SYT run's logged looks, in the order of its rows (the calibration and the coverage)."""
+    each SYT run's logged looks, in the order of its rows (the calibration and the coverage);
+    ``last_looks``: each failed run's last look with the simulator's truth, by row key (the failures)."""
     ours = syt_tables(rows)
     syt = [r for r in rows if r["method"] == "syt"]
     rate = sum(r["success"] for r in syt) / len(syt) if syt else None
@@ -463,6 +466,7 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
     lines += _stats_md(method_stats(rows)) + _errors_md(rows)
     lines += ["### Per method, cost function and prior", ""]
     lines += _stats_md([_stats(name, group) for name, group in variants(rows)], "Variant")
+    lines += failures_md(variants(rows), last_looks or {})
     lines += _per_world_md(rows) + _priors_md(rows)
     source = f"the SYT runs ({scope(syt)})"
     every_look = [look for run in looks for look in run]
@@ -547,9 +551,12 @@ def write_plots(rows: list[dict], out: Path) -> list[Path]:
 def write_report(results: Path, out: Path, sweep: tuple[int, float, int] | None = None) -> list[Path]:
     """report.md and the plots beside it; returns what was written."""
     rows = load_results(results)
-    looks = [read_looks(Path(results).parent / r["run_dir"] / LOOKS_FILE) if r["run_dir"] else []
-             for r in rows if r["method"] == "syt"]
+    def looks_of(row: dict) -> list[Look]:
+        return read_looks(Path(results).parent / row["run_dir"] / LOOKS_FILE) if row["run_dir"] else []
+
+    looks = [looks_of(r) for r in rows if r["method"] == "syt"]
+    last_looks = {r["key"]: last_true_look(looks_of(r)) for r in rows if not r["success"]}
     out.mkdir(parents=True, exist_ok=True)
     report = out / "report.md"
-    report.write_text(render(rows, sweep, looks))
+    report.write_text(render(rows, sweep, looks, last_looks))
     return [report, *write_plots(rows, out)]

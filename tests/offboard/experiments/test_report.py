@@ -28,9 +28,9 @@ def _look(expected: float, realised: float, detected: bool = False) -> dict:
 
 
 def _row(results: Path, method: str, world: str, prior: str, seed: int, motion_s: float | None,
-         processing_s: float | None, looks: list[dict] = ()) -> dict:
+         processing_s: float | None, looks: list[dict] = (), **outcome) -> dict:
     x, y, z, yaw = TARGETS[world]
-    summary = {**SUMMARY, "target_estimate_m": [x, y - 0.05, z + 0.1]}
+    summary = {**SUMMARY, "target_estimate_m": [x, y - 0.05, z + 0.1], **outcome}
     if motion_s is not None:
         summary.update(motion_time_s=motion_s, processing_time_s=processing_s)
     run = Run(method, world, STARTS[world], TARGETS[world], 3 if method == "syt" else None, prior, seed)
@@ -170,6 +170,28 @@ def test_the_report_sums_up_how_far_the_believed_pose_was_from_the_true_one_at_t
             "max 0.500 m; 20% of the looks were more than 0.3 m off" in text)
     assert "The heading's error: median 1.0°, p95 3.0°, max 3.0°" in text
     assert parse_look(json.dumps(_look(0.1, 0.1))).pose_error_m is None  # a search outside the harness
+
+
+def test_each_failed_run_is_put_down_to_a_cause_and_a_heading_error_counts_by_what_it_moves(tmp_path):
+    results = tmp_path / "results.csv"
+    x, y, z, _ = TARGETS["office"]
+    off = [x, y + 0.6, z + 0.1]  # found, 0.6 m from the truth: a failure
+    seen_from = {"x_m": x - 3.0, "y_m": y, "true_x_m": x - 3.0, "true_y_m": y, "true_heading_deg": 0.0}
+    turned = {**_look(0.5, 0.5, True), **seen_from, "heading_deg": 8.0}  # 8° at 3 m: the target moves 0.42 m
+    right = {**_look(0.5, 0.5, True), **seen_from, "heading_deg": 1.0}
+    _row(results, "oracle", "office", "uniform", 0, 60.0, 5.0, [right, turned], target_estimate_m=off)
+    _row(results, "oracle", "office", "uniform", 1, 60.0, 5.0, [right], target_estimate_m=off)
+    _row(results, "syt", "office", "uniform", 0, 60.0, 5.0, [right], found=False, status="exhausted")
+    _row(results, "syt", "office", "uniform", 1, 60.0, 5.0, [right])  # a success: not listed
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text().split("## Failures")[1].split("\n## ")[0]
+    assert "| SYT cost 3, uniform | 2 | 1 | 1 | 0 | 0 |" in text and "| oracle, uniform | 2 | 2 | 0 | 1 | 1 |" in text
+    rows = [line for line in text.splitlines() if line.startswith("| ") and "office" in line]
+    assert len(rows) == 3
+    [turned_row] = [r for r in rows if "localisation" in r]
+    assert "| 0 | localisation | found |" in turned_row and turned_row.endswith("| 0.00 | 0.42 |")  # no position error
+    assert any("| 1 | estimate | found |" in r and r.endswith("| 0.00 | 0.05 |") for r in rows)
+    assert any("| not found | exhausted |" in r for r in rows)
 
 
 def test_a_suites_worlds_are_named_by_the_suite():
