@@ -150,8 +150,9 @@ def calibration(looks: list[Look]) -> list[CalibrationBin]:
     return bins
 
 
-def _cell(v: float | None) -> str:
-    return "—" if v is None else f"{v:.3f}"
+def cell(value: float | None, digits: int = 2) -> str:
+    """A number for a Markdown table; a dash where there is none."""
+    return "—" if value is None else f"{value:.{digits}f}"
 
 
 def calibration_md(bins: list[CalibrationBin], source: str) -> list[str]:
@@ -167,8 +168,8 @@ def calibration_md(bins: list[CalibrationBin], source: str) -> list[str]:
     for b in bins:
         bracket = "]" if b.high == BIN_EDGES[-1] else ")"
         verdict = {None: f"— (< {MIN_LOOKS} looks)", True: "PASS", False: "FAIL"}[b.passes]
-        lines.append(f"| [{b.low:g}, {b.high:g}{bracket} | {b.looks} | {_cell(b.expected)} | {_cell(b.realised)} | "
-                     f"{_cell(b.hit_rate)} | {verdict} |")
+        lines.append(f"| [{b.low:g}, {b.high:g}{bracket} | {b.looks} | {cell(b.expected, 3)} | {cell(b.realised, 3)} | "
+                     f"{cell(b.hit_rate, 3)} | {verdict} |")
     checked = [b for b in bins if b.checked]
     overall = "PASS" if checked and all(b.passes for b in checked) else ("FAIL" if checked else "not checked")
     return lines + ["", f"Calibration overall: **{overall}** ({sum(bool(b.passes) for b in checked)}/{len(checked)} "
@@ -219,7 +220,7 @@ def coverage_md(rows: list[Coverage], source: str) -> list[str]:
              "last column is what happened (more than P[F] where targets are not placed as the prior says).", "",
              "| Looks k | Runs with k looks and no detection | Their median P[F] | Runs that found it within k looks |",
              "|---" * 4 + "|"]
-    lines += [f"| {r.looks} | {r.searching} | {_cell(r.ruled_out)} | "
+    lines += [f"| {r.looks} | {r.searching} | {cell(r.ruled_out, 3)} | "
               f"{'—' if r.found_within is None else f'{r.found_within:.0%}'} |" for r in rows]
     return lines + [""]
 

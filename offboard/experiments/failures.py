@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from offboard.experiments.calibration import LOCALISATION_FAR_M, Look
+from offboard.experiments.calibration import LOCALISATION_FAR_M, Look, cell
 
 CAUSES = ("not found", "localisation", "estimate")
 Groups = list[tuple[str, list[dict]]]  # (variant name, its rows), as the report groups runs
@@ -54,10 +54,6 @@ def failures(groups: Groups, last_looks: dict[str, Look | None]) -> list[Failure
     return [failure(name, r, last_looks.get(r["key"])) for name, rows in groups for r in rows if not r["success"]]
 
 
-def _cell(value: float | None, digits: int = 2) -> str:
-    return "—" if value is None else f"{value:.{digits}f}"
-
-
 def failures_md(groups: Groups, last_looks: dict[str, Look | None]) -> list[str]:
     """The report's section: failures per variant and cause, then every failed run."""
     found = failures(groups, last_looks)
@@ -76,7 +72,7 @@ def failures_md(groups: Groups, last_looks: dict[str, Look | None]) -> list[str]
               "| Pose off at the last look (m) | Target moved by it (m) |", "|---" * 12 + "|"]
     for f in found:
         r = f.row
-        lines.append(f"| {f.variant} | {r['world']} | {r['start']} | {r['target']} | {_cell(r['seed'], 0)} | {f.cause} "
-                     f"| {r['status']} | {_cell(r['actions'], 0)} | {_cell(r['distance_m'])} "
-                     f"| {_cell(r['estimate_error_m'])} | {_cell(f.pose_error_m)} | {_cell(f.target_shift_m)} |")
+        lines.append(f"| {f.variant} | {r['world']} | {r['start']} | {r['target']} | {cell(r['seed'], 0)} | {f.cause} "
+                     f"| {r['status']} | {cell(r['actions'], 0)} | {cell(r['distance_m'])} "
+                     f"| {cell(r['estimate_error_m'])} | {cell(f.pose_error_m)} | {cell(f.target_shift_m)} |")
     return lines + [""]

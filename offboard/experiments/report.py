@@ -27,8 +27,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, calibration_md, coverage, coverage_md,
-                                              localisation_md, read_looks)
+from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, calibration_md, cell, coverage,
+                                              coverage_md, localisation_md, read_looks)
 from offboard.experiments.failures import failures_md, last_true_look
 
 COSTS = (1, 2, 3, 4)
@@ -144,10 +144,6 @@ class Verdict:
     evidence: str
 
 
-def _fmt(v: float | None, digits: int = 2) -> str:
-    return "—" if v is None else f"{v:.{digits}f}"
-
-
 def _comparisons(pairs: list[tuple[float | None, float | None]]) -> tuple[bool | None, int]:
     """(all a < b, how many hold); None if a value is missing."""
     if any(a is None or b is None for a, b in pairs):
@@ -172,12 +168,12 @@ def _knowledge_and_actions(u: dict, k: dict) -> list[Verdict]:
     return [
         Verdict("Prior knowledge drastically accelerates the search (time, actions, distance).", ok1,
                 f"{n1}/12 cost×metric cells lower with knowledge; mean over costs: "
-                f"time {_fmt(_mean(u['time_min']))} → {_fmt(_mean(k['time_min']))} min, "
-                f"actions {_fmt(_mean(u['actions']))} → {_fmt(_mean(k['actions']))}, "
-                f"distance {_fmt(_mean(u['distance_m']))} → {_fmt(_mean(k['distance_m']))} m"),
+                f"time {cell(_mean(u['time_min']))} → {cell(_mean(k['time_min']))} min, "
+                f"actions {cell(_mean(u['actions']))} → {cell(_mean(k['actions']))}, "
+                f"distance {cell(_mean(u['distance_m']))} → {cell(_mean(k['distance_m']))} m"),
         Verdict("The cost function has no significant effect on the number of actions.", ok2,
-                f"spread (max − min) / mean of the four costs' mean actions: no knowledge {_fmt(spreads[0])}, "
-                f"knowledge {_fmt(spreads[1])} (criterion ≤ {SAME_ACTIONS:g})"),
+                f"spread (max − min) / mean of the four costs' mean actions: no knowledge {cell(spreads[0])}, "
+                f"knowledge {cell(spreads[1])} (criterion ≤ {SAME_ACTIONS:g})"),
     ]
 
 
@@ -187,13 +183,13 @@ def _two_stages(u: dict, k: dict) -> list[Verdict]:
     ok4, n4 = _comparisons([(tab[m][c], tab[m][1]) for tab in (u, k) for m in moving for c in (2, 3)])
     return [
         Verdict("The two-stage search (costs 2-4) reduces distance and time against cost 1.", ok3,
-                f"{n3}/12 comparisons hold; distance cost 1 vs 2/3/4: no knowledge {_fmt(u['distance_m'][0])} vs "
-                f"{'/'.join(_fmt(v) for v in u['distance_m'][1:])} m, knowledge {_fmt(k['distance_m'][0])} vs "
-                f"{'/'.join(_fmt(v) for v in k['distance_m'][1:])} m"),
+                f"{n3}/12 comparisons hold; distance cost 1 vs 2/3/4: no knowledge {cell(u['distance_m'][0])} vs "
+                f"{'/'.join(cell(v) for v in u['distance_m'][1:])} m, knowledge {cell(k['distance_m'][0])} vs "
+                f"{'/'.join(cell(v) for v in k['distance_m'][1:])} m"),
         Verdict("Minimising the distance to the next position (costs 3, 4) reduces distance and time further.", ok4,
-                f"{n4}/8 comparisons against cost 2 hold; time cost 2 vs 3/4: no knowledge {_fmt(u['time_min'][1])} vs "
-                f"{_fmt(u['time_min'][2])}/{_fmt(u['time_min'][3])} min, knowledge {_fmt(k['time_min'][1])} vs "
-                f"{_fmt(k['time_min'][2])}/{_fmt(k['time_min'][3])} min"),
+                f"{n4}/8 comparisons against cost 2 hold; time cost 2 vs 3/4: no knowledge {cell(u['time_min'][1])} vs "
+                f"{cell(u['time_min'][2])}/{cell(u['time_min'][3])} min, knowledge {cell(k['time_min'][1])} vs "
+                f"{cell(k['time_min'][2])}/{cell(k['time_min'][3])} min"),
     ]
 
 
@@ -204,12 +200,12 @@ def _best(u: dict, k: dict) -> list[Verdict]:
     ok6, n6 = _comparisons([(k["actions"][c], k["actions"][1]) for c in (0, 2, 3)])
     return [
         Verdict("Knowledge with cost 3 gives the best results (least time and distance of all eight cells).", ok5,
-                f"knowledge + cost 3: {_fmt(k['time_min'][2])} min, {_fmt(k['distance_m'][2])} m; least of all cells: "
-                f"{_fmt(min(known['time_min'], default=None))} min, {_fmt(min(known['distance_m'], default=None))} m"),
+                f"knowledge + cost 3: {cell(k['time_min'][2])} min, {cell(k['distance_m'][2])} m; least of all cells: "
+                f"{cell(min(known['time_min'], default=None))} min, {cell(min(known['distance_m'], default=None))} m"),
         Verdict("The number of actions is best minimised by costs 1, 3 and 4 (checked with knowledge, where the "
                 "report's Table 3 supports it; in its Table 2 cost 1 needs the most).", ok6,
                 f"{n6}/3 of costs 1/3/4 need fewer actions than cost 2: "
-                f"{'/'.join(_fmt(k['actions'][c]) for c in (0, 2, 3))} vs {_fmt(k['actions'][1])}"),
+                f"{'/'.join(cell(k['actions'][c]) for c in (0, 2, 3))} vs {cell(k['actions'][1])}"),
     ]
 
 
@@ -324,12 +320,12 @@ def _table_md(prior: str, ours: Tables, rows: list[dict]) -> list[str]:
     lines = [f"### {PRIORS[prior]} (prior `{prior}`; the report's {title})", "",
              "| Average per run | " + " | ".join(f"Cost({c})" for c in COSTS) + " |", "|---" * 5 + "|"]
     for metric, label in METRICS.items():
-        cells = [f"{_fmt(ours[prior][metric][i])} ({REPORT[prior][metric][i]:g})" for i in range(4)]
+        cells = [f"{cell(ours[prior][metric][i])} ({REPORT[prior][metric][i]:g})" for i in range(4)]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     counts = []
     for c in COSTS:
-        cell = [r for r in rows if r["method"] == "syt" and r["prior"] == prior and r["cost"] == c]
-        counts.append(f"{sum(r['success'] for r in cell)}/{len(cell)}")
+        members = [r for r in rows if r["method"] == "syt" and r["prior"] == prior and r["cost"] == c]
+        counts.append(f"{sum(r['success'] for r in members)}/{len(members)}")
     mine = [r for r in rows if r["method"] == "syt" and r["prior"] == prior]
     return lines + ["| Successful / all runs | " + " | ".join(counts) + " |", "", f"From {scope(mine)}.", ""]
 
@@ -341,9 +337,9 @@ def _stats_md(stats: list[MethodStats], first: str = "Method", latency: bool = T
     lines = ["| " + " | ".join(heads) + " |", "|---" * len(heads) + "|"]
     for s in stats:
         rate = "—" if s.success_rate is None else f"{100 * s.success_rate:.1f}%"
-        cells = [s.name, str(s.runs), rate, _fmt(s.spl, 3), _fmt(s.actions, 1), _fmt(s.distance_m),
-                 _fmt(s.motion_min), _fmt(s.processing_min), _fmt(s.time_min if s.processing_min is not None else None)]
-        cells += [f"{_fmt(s.latency_p50_ms, 0)} / {_fmt(s.latency_p95_ms, 0)}"] * latency + [s.scope] * scoped
+        cells = [s.name, str(s.runs), rate, cell(s.spl, 3), cell(s.actions, 1), cell(s.distance_m),
+                 cell(s.motion_min), cell(s.processing_min), cell(s.time_min if s.processing_min is not None else None)]
+        cells += [f"{cell(s.latency_p50_ms, 0)} / {cell(s.latency_p95_ms, 0)}"] * latency + [s.scope] * scoped
         lines.append("| " + " | ".join(cells) + " |")
     return lines + [""]
 
@@ -371,11 +367,11 @@ def _priors_md(rows: list[dict]) -> list[str]:
               "| Cost | Prior | Runs | Success | SPL | Looks | Distance (m) | Worlds; seeds |", "|---" * 8 + "|"]
     for cost in sorted({r["cost"] for r in syt}):
         for prior in priors:
-            cell = [r for r in syt if r["cost"] == cost and r["prior"] == prior]
-            if cell:
-                s = _stats(prior, cell)
-                lines.append(f"| {cost:g} | {prior} | {s.runs} | {100 * s.success_rate:.1f}% | {_fmt(s.spl, 3)} | "
-                             f"{_fmt(s.actions, 1)} | {_fmt(s.distance_m)} | {s.scope} |")
+            members = [r for r in syt if r["cost"] == cost and r["prior"] == prior]
+            if members:
+                s = _stats(prior, members)
+                lines.append(f"| {cost:g} | {prior} | {s.runs} | {100 * s.success_rate:.1f}% | {cell(s.spl, 3)} | "
+                             f"{cell(s.actions, 1)} | {cell(s.distance_m)} | {s.scope} |")
     return lines + [""]
 
 
@@ -407,7 +403,7 @@ def _paired_md(rows: list[dict]) -> list[str]:
              "|---" * 5 + "|"]
     for name, n, mine, theirs in pairs:
         ahead = "—" if mine is None or theirs is None else ("yes" if mine < theirs else "no")
-        lines.append(f"| {name} | {n} | {_fmt(mine)} | {_fmt(theirs)} | {ahead} |")
+        lines.append(f"| {name} | {n} | {cell(mine)} | {cell(theirs)} | {ahead} |")
     return lines + [""]
 
 
@@ -437,7 +433,7 @@ def _wall_md(rows: list[dict], sweep: tuple[int, float, int] | None = None) -> l
             f"(mean {statistics.fmean(walls):.0f} s, median {statistics.median(walls):.0f} s, max {max(walls):.0f} s "
             "per run; a worker's first run includes its agent's start-up); with N jobs the sweep's wall time is about "
             "this sum / N. "
-            "Mean per run: " + ", ".join(f"{m} {_fmt(w, 0)} s" for m, w in by_method.items()) + ".", ""]
+            "Mean per run: " + ", ".join(f"{m} {cell(w, 0)} s" for m, w in by_method.items()) + ".", ""]
 
 
 def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks: list[list[Look]] = (),
