@@ -9,7 +9,7 @@ it drives SYT:
 - ``frontier``: the nearest candidate next to unknown floor, else the nearest unvisited one;
 - ``oracle``: drive to the closest floor position from which the detector finds the target almost
   surely (its measured table), with room to stop a little off, and look straight at it (it is given
-  the truth).
+  the truth); should those looks miss, the closest such position at least 1 m from it.
 
 "Look around" takes every camera setting of the planner once, quickest to reach first. A weak
 detection needs a second look before the search ends; once a detection has collapsed the belief onto
@@ -55,6 +55,9 @@ class BaselineConfig:
     frontier_radius_m: float = field(default=0.75, metadata=bounds(0.05, 10.0))  # "adjacent" to unknown floor
     oracle_looks: int = field(default=3, metadata=bounds(1, 100))  # looks at the target before giving up
     oracle_moves: int = field(default=2, metadata=bounds(1, 100))  # tries to reach the viewpoint
+    # viewpoints to try, each at least oracle_retry_m from those tried: another view, not the same one a step off
+    oracle_viewpoints: int = field(default=2, metadata=bounds(1, 100))
+    oracle_retry_m: float = field(default=1.0, metadata=bounds(0.0, 10.0))
     arrived_m: float = field(default=ARRIVAL_MARGIN_M, metadata=bounds(0.0, 5.0))  # near enough to the viewpoint
     # where the oracle looks from: a higher rate than SPL's "sees the target" (0.8), on the floor the navigator
     # drives; should no spot qualify (with ``arrived_m`` around it), SPL's own criteria
@@ -191,10 +194,17 @@ class Oracle:
     def __init__(self, planner: SearchPlanner, truth: Truth, config: BaselineConfig):
         self.planner, self.truth, self.config = planner, truth, config
         self.goal: tuple[float, float] | None = None
+        self.tried: tuple[tuple[float, float], ...] = ()  # viewpoints whose looks did not find it
         self.moves = self.looks = 0
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
+        if self.looks >= self.config.oracle_looks:
+            self.tried += (self.goal,)
+            if len(self.tried) >= self.config.oracle_viewpoints:
+                return Decision("stop", f"oracle: {self.looks} looks from each of {len(self.tried)} viewpoints did "
+                                "not find it", status="exhausted")
+            self.goal, self.moves, self.looks = None, 0, 0
         if self.goal is None:
             self.goal = self._viewpoint((pose.x_m, pose.y_m))
         if self.goal is None:
@@ -203,18 +213,17 @@ class Oracle:
         if away and self.moves < self.config.oracle_moves:
             self.moves += 1
             return _within_budget(self.planner, self._move(pose), elapsed_s)
-        if self.looks >= self.config.oracle_looks:
-            return Decision("stop", f"oracle: {self.looks} looks at the target did not find it", status="exhausted")
         self.looks += 1
         return _within_budget(self.planner, self._look_from(pose, pan_rad, tilt_rad, 0.0), elapsed_s)
 
     def _viewpoint(self, start_xy: tuple[float, float]) -> tuple[float, float] | None:
-        """Its own strict view with room to stop a little off; else SPL's closest seeing position."""
-        strict = self.config.oracle_view
-        goal, _ = viewpoint(self.truth, start_xy, strict, self.config.arrived_m)
+        """Its own strict view with room to stop a little off; else SPL's closest seeing position; away
+        from the viewpoints already tried."""
+        strict, avoid = self.config.oracle_view, dict(avoid=self.tried, avoid_m=self.config.oracle_retry_m)
+        goal, _ = viewpoint(self.truth, start_xy, strict, self.config.arrived_m, **avoid)
         if goal is None:
             goal, _ = viewpoint(self.truth, start_xy, SeeingCriteria(table=strict.table,
-                                                                     robot_radius_m=strict.robot_radius_m))
+                                                                     robot_radius_m=strict.robot_radius_m), **avoid)
         return goal
 
     def _move(self, pose: Pose2D) -> Decision:

@@ -201,16 +201,23 @@ def _seeing_face(truth: Truth, floor: FloorMap, criteria: SeeingCriteria, normal
 
 
 def viewpoint(truth: Truth, start_xy: tuple[float, float], criteria: SeeingCriteria = SeeingCriteria(),
-              margin_m: float = 0.0) -> tuple[tuple[float, float] | None, float]:
+              margin_m: float = 0.0, avoid: tuple[tuple[float, float], ...] = (),
+              avoid_m: float = 0.0) -> tuple[tuple[float, float] | None, float]:
     """The seeing position closest to ``start_xy`` along collision-free paths, and that path's length
     (``None, inf`` if none is reachable). With ``margin_m``, only positions whose every free
-    neighbour within that distance sees the target too: a robot that stops a little off still sees it."""
+    neighbour within that distance sees the target too: a robot that stops a little off still sees it.
+    Positions within ``avoid_m`` of a point of ``avoid`` (viewpoints already tried) do not count."""
     floor = true_floor_map(truth, criteria)
     seen = seeing_cells(truth, floor, criteria)
     if margin_m > 0:
         radius = int(math.ceil(margin_m / floor.resolution_m))
         disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
         seen &= cv2.erode((seen | floor.blocked).astype(np.uint8), disk, borderValue=1).astype(bool)
+    if avoid:
+        i, j = np.indices(seen.shape)
+        x, y = (i + 0.5) * floor.resolution_m, (j + 0.5) * floor.resolution_m  # as grid_planner.cell_center
+        for px, py in avoid:
+            seen &= np.hypot(x - px, y - py) > avoid_m
     field_m = grid_planner.distance_field(floor, start_xy)
     cost = np.where(seen, field_m, np.inf)
     best = np.unravel_index(int(np.argmin(cost)), cost.shape)

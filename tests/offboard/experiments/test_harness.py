@@ -266,6 +266,23 @@ def test_the_oracle_drives_to_the_nearest_seeing_position_and_looks_at_the_targe
         BASELINES["oracle"](BaselineContext())
 
 
+def test_an_oracle_whose_looks_miss_tries_another_viewpoint_then_gives_up():
+    planner = _planner()
+    policy = BASELINES["oracle"](BaselineContext(truth=TRUTH))(planner)
+    config = BaselineContext().config
+    first = _decide(policy, planner, Pose2D(5.5, 0.5, math.pi)).position_m
+    looks = [_decide(policy, planner, Pose2D(*first, 0.0)) for _ in range(config.oracle_looks)]
+    assert all(look.kind == "look" for look in looks)  # the detector never fired: these looks missed
+    second = _decide(policy, planner, Pose2D(*first, 0.0))
+    assert second.kind == "move" and np.hypot(*np.subtract(second.position_m, first)) > config.oracle_retry_m
+    floor = true_floor_map(TRUTH, config.oracle_view)
+    assert seeing_cells(TRUTH, floor, config.oracle_view)[grid_planner.cell_of(floor, second.position_m)]
+    for _ in range(config.oracle_looks):
+        assert _decide(policy, planner, Pose2D(*second.position_m, 0.0)).kind == "look"
+    stop = _decide(policy, planner, Pose2D(*second.position_m, 0.0))
+    assert stop.kind == "stop" and stop.status == "exhausted" and "2 viewpoints" in stop.reason
+
+
 def test_a_tall_obstacle_hides_the_target_and_a_low_one_does_not():
     def sees_from(box_top_m: float) -> bool:
         truth = Truth((6.0, 4.0, 2.5), (Obstacle((2.5, 1.8, 0.0), (3.5, 2.0, box_top_m)),), (3.0, 3.5, 0.9), -90.0)
