@@ -4,6 +4,7 @@ import tomllib
 from pathlib import Path
 
 from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -11,7 +12,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def pins() -> dict[str, str]:
     lines = (ROOT / "constraints.txt").read_text().splitlines()
     pairs = [line.split("==") for line in lines if line.strip() and not line.startswith("#")]
-    return {name.lower().replace("_", "-"): version for name, version in pairs}
+    return {canonicalize_name(name): version for name, version in pairs}
 
 
 def requirements() -> list[Requirement]:
@@ -23,7 +24,7 @@ def requirements() -> list[Requirement]:
 def test_every_requirement_is_pinned_at_a_version_it_accepts():
     pinned = pins()
     for requirement in requirements():
-        name = requirement.name.lower().replace("_", "-")
+        name = canonicalize_name(requirement.name)
         assert name in pinned, f"constraints.txt does not pin {requirement.name}"
         assert requirement.specifier.contains(pinned[name]), f"{requirement} rejects the pinned {pinned[name]}"
 

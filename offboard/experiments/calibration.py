@@ -24,6 +24,10 @@ import statistics
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from shared.geometry import Pose2D
+
 LOOKS_FILE = "looks.jsonl"
 BIN_EDGES = (0.0, 0.05, 0.1, 0.2, 0.4, 1.0)  # the last bin includes 1
 MIN_LOOKS = 20  # a bin with fewer looks is shown but not checked
@@ -56,11 +60,9 @@ class Look:
         placed as if seen from the believed one (at 3 m, 1° of heading alone moves it 5 cm)."""
         if self.truth is None:
             return None
-        (bx, by, bh), (tx, ty, th) = self.believed, self.truth
-        turn = math.radians(bh - th)
-        dx, dy = point_xy[0] - tx, point_xy[1] - ty
-        placed = (bx + math.cos(turn) * dx - math.sin(turn) * dy, by + math.sin(turn) * dx + math.cos(turn) * dy)
-        return math.dist(placed, point_xy)
+        believed, truth = (Pose2D(x, y, math.radians(h)).to_transform() for x, y, h in (self.believed, self.truth))
+        point = np.array([point_xy[0], point_xy[1], 0.0])
+        return float(np.linalg.norm(believed.compose(truth.inverse()).apply(point) - point))
 
 
 _FIELDS = {"action": int, "expected_p": float, "realised_p": float, "detected": bool, "processing_s": float,

@@ -547,11 +547,10 @@ def write_plots(rows: list[dict], out: Path) -> list[Path]:
 def write_report(results: Path, out: Path, sweep: tuple[int, float, int] | None = None) -> list[Path]:
     """report.md and the plots beside it; returns what was written."""
     rows = load_results(results)
-    def looks_of(row: dict) -> list[Look]:
-        return read_looks(Path(results).parent / row["run_dir"] / LOOKS_FILE) if row["run_dir"] else []
-
-    looks = [looks_of(r) for r in rows if r["method"] == "syt"]
-    last_looks = {r["key"]: last_true_look(looks_of(r)) for r in rows if not r["success"]}
+    logged = {r["key"]: read_looks(Path(results).parent / r["run_dir"] / LOOKS_FILE) if r["run_dir"] else []
+              for r in rows if r["method"] == "syt" or not r["success"]}  # each run's file read once
+    looks = [logged[r["key"]] for r in rows if r["method"] == "syt"]
+    last_looks = {r["key"]: last_true_look(logged[r["key"]]) for r in rows if not r["success"]}
     out.mkdir(parents=True, exist_ok=True)
     report = out / "report.md"
     report.write_text(render(rows, sweep, looks, last_looks))
