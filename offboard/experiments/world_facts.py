@@ -214,10 +214,10 @@ def viewpoint(truth: Truth, start_xy: tuple[float, float], criteria: SeeingCrite
         disk = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
         seen &= cv2.erode((seen | floor.blocked).astype(np.uint8), disk, borderValue=1).astype(bool)
     if avoid:
-        i, j = np.indices(seen.shape)
-        x, y = (i + 0.5) * floor.resolution_m, (j + 0.5) * floor.resolution_m  # as grid_planner.cell_center
-        for px, py in avoid:
-            seen &= np.hypot(x - px, y - py) > avoid_m
+        cells = np.argwhere(seen)
+        centres = grid_planner.cell_centers(floor, cells)
+        near = [np.hypot(*(centres - point).T) <= avoid_m for point in avoid]
+        seen[tuple(cells[np.any(near, axis=0)].T)] = False
     field_m = grid_planner.distance_field(floor, start_xy)
     cost = np.where(seen, field_m, np.inf)
     best = np.unravel_index(int(np.argmin(cost)), cost.shape)

@@ -48,6 +48,11 @@ def cell_center(floor_map: FloorMap, cell: tuple[int, int]) -> Point:
     return ((cell[0] + 0.5) * res, (cell[1] + 0.5) * res)
 
 
+def cell_centers(floor_map: FloorMap, cells: np.ndarray) -> np.ndarray:
+    """World centres (N, 2) of cells (N, 2): :func:`cell_center` for many at once."""
+    return (cells + 0.5) * floor_map.resolution_m
+
+
 def is_free(floor_map: FloorMap, xy: Point) -> bool:
     """Can the robot's centre stand at ``xy``? (Outside the room it cannot.)"""
     nx, ny = floor_map.blocked.shape
@@ -63,7 +68,7 @@ def nearest_free_cell(floor_map: FloorMap, xy: Point) -> tuple[int, int] | None:
     free = np.argwhere(~floor_map.blocked)
     if free.shape[0] == 0:
         return None
-    centres = (free + 0.5) * floor_map.resolution_m
+    centres = cell_centers(floor_map, free)
     best = int(np.argmin(np.hypot(centres[:, 0] - xy[0], centres[:, 1] - xy[1])))
     return int(free[best, 0]), int(free[best, 1])
 
