@@ -200,7 +200,8 @@ class Oracle:
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
         if self.looks >= self.config.oracle_looks:
-            self.tried += (self.goal,)
+            if self.goal not in self.tried:  # asked again after stopping (the search's squeeze retry)
+                self.tried += (self.goal,)
             if len(self.tried) >= self.config.oracle_viewpoints:
                 return Decision("stop", f"oracle: {self.looks} looks from each of {len(self.tried)} viewpoints did "
                                 "not find it", status="exhausted")

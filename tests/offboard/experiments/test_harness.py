@@ -281,6 +281,8 @@ def test_an_oracle_whose_looks_miss_tries_another_viewpoint_then_gives_up():
         assert _decide(policy, planner, Pose2D(*second.position_m, 0.0)).kind == "look"
     stop = _decide(policy, planner, Pose2D(*second.position_m, 0.0))
     assert stop.kind == "stop" and stop.status == "exhausted" and "2 viewpoints" in stop.reason
+    again = _decide(policy, planner, Pose2D(*second.position_m, 0.0))  # the search asks again on the bare radius
+    assert again.kind == "stop" and again.reason == stop.reason
 
 
 def test_a_tall_obstacle_hides_the_target_and_a_low_one_does_not():
