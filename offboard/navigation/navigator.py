@@ -12,7 +12,9 @@ Each step is one bounded straight move (``bug.step_m``). Before it the head look
 and a stereo pair updates, in turn, the pose (scan matching, :mod:`offboard.navigation.localization`, against
 the map of *earlier* frames) and then the shared :class:`~offboard.perception.occupancy.OccupancyGrid` (placed
 with the corrected pose). Motions are planned in the corrected world frame and sent as odometry-frame
-waypoints through the :class:`~offboard.navigation.localization.PoseTracker`. A stall (the base touched
+waypoints through the :class:`~offboard.navigation.localization.PoseTracker`. Driving into unmapped
+space, the look toward the motion has nothing to match: if the pose is then unsure, the head turns to
+where the map (the room's walls at least) holds the most structure in range, and looks there. A stall (the base touched
 something stereo missed) marks the obstacle in the map and backs off. A goal the map shows blocked is
 approached until seen from close by (far obstacles are mapped thick).
 
@@ -39,7 +41,8 @@ import numpy as np
 
 from offboard.navigation.grid_planner import (Point, cell_center, distance_field, distances_at, is_free, nearest_free_cell,
                                    segment_is_free, shortest_path)
-from offboard.navigation.localization import MatchConfig, PoseTracker, ScanMatcher, map_field, scan_from_disparity
+from offboard.navigation.localization import (MatchConfig, PoseTracker, ScanMatcher, map_field, scan_from_disparity,
+                                              structure_in_view)
 from offboard.perception.occupancy import FloorMap, OccupancyGrid
 from offboard.robot.robot_client import CommandError, RobotClient
 from offboard.perception.stereo import StereoConfig, StereoMatcher
@@ -68,6 +71,12 @@ class NavigatorConfig:
     max_steps: int = 150
     max_distance_m: float = 60.0
     localize: bool = True  # correct odometry by scan matching (off: dead reckoning only)
+    # a pose this unsure (1σ of where a point relocalize_range_m ahead lands) after the look toward
+    # the motion earns a look at mapped structure: driving into unmapped space, that look saw nothing
+    # to match, and a heading error moves a target seen at the detector's range the farthest
+    relocalize_shift_m: float = 0.15
+    relocalize_range_m: float = 3.0
+    max_relocalizations: int = 4  # such looks per run
     # the bug's "sensor" is the whole map (ranges across the room); one step is about the blind zone
     # ahead of the tilted head, so each move ends where the last look reached the floor
     bug: BugConfig = field(default_factory=lambda: BugConfig(sensor_range_m=12.0, step_m=0.6))
@@ -103,6 +112,8 @@ class _Run:
     stalls: int = 0
     surveys: int = 0
     probes: int = 0
+    relocalizations: int = 0
+    pans_here: list[float] = field(default_factory=list)  # pans looked at since the last motion (degrees)
     visited: list[Point] = field(default_factory=list)  # where each step ended
 
 
@@ -194,6 +205,8 @@ class Navigator:
         bug = TangentBug(goal, self.config.bug)
         while True:
             verdict = self._verdict(run)
+            if verdict is not None and verdict[0] == "reached" and self._relocalize(run):
+                continue  # the corrected pose may not have arrived after all
             if verdict is not None:
                 return self._result(run, *verdict)
             waypoint, why = self._next_waypoint(run, bug)
@@ -257,9 +270,33 @@ class Navigator:
         """Plan on the current map, look toward the motion, re-plan on the refreshed map."""
         planned = self._plan(run, bug)
         if planned[0] is not None:
-            run.last_time_s = self.sense(self._pan_toward(planned[0]))
+            pan = self._pan_toward(planned[0])
+            run.last_time_s = self.sense(pan)
+            run.pans_here.append(pan)
+            self._relocalize(run)
             planned = self._plan(run, bug)
         return planned
+
+    def _relocalize(self, run: _Run) -> bool:
+        """If the pose is unsure, look where the map holds the most structure not looked at from here
+        (the walls are always mapped); whether it looked."""
+        c = self.config
+        if (not c.localize or run.relocalizations >= c.max_relocalizations
+                or self.tracker.target_shift_m(c.relocalize_range_m) <= c.relocalize_shift_m):
+            return False
+        hfov = self._intrinsics.hfov_rad
+        pans = np.array([p for p in c.survey_pans_deg if all(abs(p - q) > math.degrees(hfov) / 2 for q in run.pans_here)
+                         and self._pantilt.pan_min_deg <= p <= self._pantilt.pan_max_deg])
+        if pans.size == 0:
+            return False
+        counts = structure_in_view(map_field(self.occupancy, c.match), self.pose, np.radians(pans), hfov, c.match)
+        pan = float(pans[int(np.argmax(counts))])
+        log.debug("pose unsure (%.2f m at %.1f m): looking for the map at pan %.0f°",
+                  self.tracker.target_shift_m(c.relocalize_range_m), c.relocalize_range_m, pan)
+        run.relocalizations += 1
+        run.last_time_s = self.sense(pan)
+        run.pans_here.append(pan)
+        return True
 
     def _plan(self, run: _Run, bug: TangentBug) -> tuple[Point | None, str]:
         floor = self.floor_map(run.squeeze)
@@ -325,6 +362,7 @@ class Navigator:
         odom_goal = self.tracker.odom_point(waypoint)
         result = self._command(self.robot.move_to, *odom_goal)
         run.steps += 1
+        run.pans_here.clear()
         run.distance_m += result.distance_m
         run.last_time_s = result.robot_time_s
         self._odom = result.pose.to_pose()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from offboard.navigation.localization import (MatchConfig, OdometryModel, PoseTracker, ScanMatcher, likelihood_field,
-                                   map_field, scan_from_disparity)
+                                   map_field, scan_from_disparity, structure_in_view)
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.voxel_grid import VoxelGrid
 from shared.geometry import HeadMount, Intrinsics, Pose2D
@@ -71,6 +71,17 @@ def test_a_displaced_scan_is_pulled_back_onto_the_map(true_pose, offset):
     assert abs(math.degrees(result.pose.heading_rad - true_pose.heading_rad)) < 0.75
 
 
+def test_the_window_reaches_the_heading_error_of_a_half_turn():
+    """3 % of a half turn is 5.4°: the robot may be 14° off, and the match must still find it."""
+    true_pose = Pose2D(2.0, 2.5, 0.0)
+    scan = camera_scan(true_pose, np.random.default_rng(0), fov_deg=90.0)
+    prior = Pose2D(2.05, 2.45, math.radians(14.0))
+    after_half_turn = np.diag([0.03 ** 2, 0.03 ** 2, math.radians(0.03 * 180.0) ** 2])
+    result = ScanMatcher().match(scan, prior, likelihood_field(box_outlines(), RES), after_half_turn)
+    assert result.accepted, result.reason
+    assert abs(math.degrees(result.pose.heading_rad - true_pose.heading_rad)) < 0.75
+
+
 def test_a_single_wall_constrains_only_across_it():
     """Along the wall every pose of the window fits as well: the best one there is arbitrary, and
     the fused pose must not be pulled toward it."""
@@ -124,6 +135,27 @@ def test_map_field_uses_occupied_columns_and_walls():
 
 
 # --- fusion ----------------------------------------------------------------------------------------
+
+def test_structure_in_view_counts_what_a_scan_could_match_within_its_range():
+    """In the 9 × 5 m room, 1 m from the west wall and facing east: ahead the east wall is 8 m off,
+    beyond the scan's 4.5 m, so there is nothing to match until a mapped box stands there."""
+    pans = np.radians([-90.0, 0.0, 90.0, 180.0])
+    here = Pose2D(1.0, 2.5, 0.0)
+    walls = structure_in_view(likelihood_field(np.zeros((180, 100), bool), RES), here, pans, math.radians(66.0))
+    assert walls[1] == 0 and min(walls[0], walls[2], walls[3]) > 20
+    occupied = np.zeros((180, 100), bool)
+    occupied[60:64, 40:60] = True  # a 1 m face 2 m ahead
+    boxed = structure_in_view(likelihood_field(occupied, RES), here, pans, math.radians(66.0))
+    assert boxed[1] >= 20 and np.array_equal(np.delete(boxed, 1), np.delete(walls, 1))
+    turned = structure_in_view(likelihood_field(occupied, RES), Pose2D(1.0, 2.5, math.pi), pans, math.radians(66.0))
+    assert turned[3] == boxed[1]  # pans turn with the robot
+
+
+def test_the_target_shift_grows_with_heading_uncertainty_times_range():
+    tracker = PoseTracker(Pose2D(0.0, 0.0, 0.0), covariance=np.diag([0.04 ** 2, 0.01 ** 2, math.radians(2.0) ** 2]))
+    assert tracker.target_shift_m(0.0) == pytest.approx(0.04)
+    assert tracker.target_shift_m(3.0) == pytest.approx(0.04 + 3.0 * math.radians(2.0))
+
 
 def test_tracker_maps_odometry_to_world_and_back():
     tracker = PoseTracker(Pose2D(1.0, 1.0, 0.0), world=Pose2D(1.2, 0.9, 0.1))  # an offset transform

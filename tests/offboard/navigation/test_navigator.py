@@ -11,11 +11,13 @@ import pytest
 from conftest import running_agent
 from offboard.bench.navigation import true_floor_map
 from offboard.navigation.grid_planner import is_free, path_length_m, shortest_path
-from offboard.navigation.navigator import Navigator, retry_busy
+from offboard.navigation.localization import PoseTracker
+from offboard.navigation.navigator import Navigator, NavigatorConfig, retry_busy
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.stereo import StereoConfig
 from offboard.perception.voxel_grid import VoxelGrid
 from onboard.sim.world import load_world
+from shared.geometry import Pose2D, wrap_angle
 
 pytestmark = pytest.mark.integration
 
@@ -134,3 +136,24 @@ def test_a_gap_the_margin_shuts_on_the_map_is_open_on_the_bare_radius(agent):
     squeezed = navigator.floor_map(squeeze=True)
     assert is_free(squeezed, (5.025, 2.825)) and not is_free(squeezed, (5.025, 2.775))  # one cube wide
     assert shortest_path(squeezed, west, east) is not None
+
+
+@pytest.mark.parametrize("relocalize", [True, False])
+def test_an_unsure_pose_looks_for_mapped_structure_when_the_way_ahead_is_unmapped(agent, relocalize):
+    """The robot believes itself 8° off its true heading, and knows it is unsure (σ 5°). Ahead lies
+    only the U, which a fresh map does not hold, so the look toward the motion has nothing to match;
+    a look at the walls beside and behind it does."""
+    _, robot = agent
+    retry_busy(robot.sim_teleport, 1.5, 2.0, 0.0)
+    odom = robot.state().pose.to_pose()
+    believed = Pose2D(odom.x_m, odom.y_m, math.radians(8.0))
+    tracker = PoseTracker(odom, world=believed, covariance=np.diag([0.02 ** 2, 0.02 ** 2, math.radians(5.0) ** 2]))
+    config = NavigatorConfig() if relocalize else NavigatorConfig(relocalize_shift_m=math.inf)
+    navigator = Navigator(robot, OccupancyGrid(VoxelGrid((8.0, 6.0, 2.5), 0.05)), tracker, config)
+    result = navigator.go_to((2.1, 2.0))
+    truth = robot.sim_truth()
+    error_deg = abs(math.degrees(wrap_angle(result.pose.heading_rad - math.radians(truth.heading_deg))))
+    if relocalize:
+        assert error_deg < 1.5 and result.matches_accepted >= 1
+    else:
+        assert error_deg > 5.0
