@@ -9,9 +9,10 @@ room's walls (the room's extent is known, report §3.1):
    per-point log-likelihood ``log(w·exp(-d²/2σ²) + 1 - w)``;
 2. **correlative search** (Olson 2009, "Real-time correlative scan matching"): the summed
    log-likelihood over a coarse (x, y, θ) grid around the predicted pose (the window widens to 3σ of
-   the prediction: a half turn at the odometry model's 3 % is 16°, and a window narrower than the
-   error refuses every match until the map, built on the wrong heading, agrees with it), then a fine
-   grid around the best coarse pose. The coarse grid's
+   the prediction up to a cap: 3σ of a half turn at the odometry model's 3 % is 16°, and a window
+   narrower than the error refuses every match until the map, built on the wrong heading, agrees
+   with it; a position already farther off than the 0.6 m cap stays so), then a fine grid around
+   the best coarse pose. The coarse grid's
    normalised likelihoods give the match's covariance, so a scan that sees a single wall is
    confident across the wall and not along it (where the likelihood stays high at both edges of the
    window, the covariance says nothing at all, not the window's width);
@@ -82,6 +83,17 @@ class LikelihoodField:
         return _bilinear_many(self.values, self.resolution_m, self.pad_cells, np.atleast_2d(xy))
 
 
+def _cell_centres(index: np.ndarray, pad_cells: int, resolution_m: float) -> np.ndarray:
+    """Coordinates (metres) of the centres of padded-grid cells along one axis (or several)."""
+    return (index - pad_cells + 0.5) * resolution_m
+
+
+def _field_at(sigmas: float, config: MatchConfig) -> float:
+    """The per-point log-likelihood ``sigmas`` standard deviations from the nearest mapped surface."""
+    w = config.hit_weight
+    return math.log(w * math.exp(-0.5 * sigmas ** 2) + 1.0 - w)
+
+
 @dataclass(frozen=True)
 class MatchResult:
     pose: Pose2D  # best world pose of the robot
@@ -125,7 +137,7 @@ def likelihood_field(occupied_xy: np.ndarray, resolution_m: float, config: Match
         d_map = cells.astype(np.float64) * resolution_m
     else:
         d_map = np.full(occupied.shape, np.inf)
-    centres = [(np.arange(n + 2 * pad_cells) - pad_cells + 0.5) * resolution_m for n in (nx, ny)]
+    centres = [_cell_centres(np.arange(n + 2 * pad_cells), pad_cells, resolution_m) for n in (nx, ny)]
     d = np.minimum(d_map, _distance_to_walls(*np.meshgrid(*centres, indexing="ij"), room))
     w = config.hit_weight
     return LikelihoodField(np.log(w * np.exp(-0.5 * (d / config.sigma_m) ** 2) + (1.0 - w)), resolution_m, pad_cells)
@@ -150,12 +162,12 @@ def map_field(occupancy: OccupancyGrid, config: MatchConfig = MatchConfig()) -> 
 
 def structure_in_view(field: LikelihoodField, pose: Pose2D, pans_rad: np.ndarray, hfov_rad: float,
                       config: MatchConfig = MatchConfig(), min_range_m: float = 0.5) -> np.ndarray:
-    """For each pan, how many floor cells of mapped structure (within ``sigma_m`` of an occupied column
-    or a wall) lie in the camera's horizontal field of view between ``min_range_m`` and the scan's
-    range: what a scan taken there could be matched against. Occlusion is ignored."""
-    near = math.log(config.hit_weight * math.exp(-0.5) + 1.0 - config.hit_weight)  # the field at 1σ
-    i, j = np.nonzero(field.values >= near)
-    xy = (np.stack([i, j], axis=1) - field.pad_cells + 0.5) * field.resolution_m
+    """For each pan (relative to the robot's heading), how many cells of the field lie within
+    ``sigma_m`` of mapped structure (an occupied column or a wall, beyond it too) in the camera's
+    horizontal field of view, between ``min_range_m`` and the scan's range from the robot's centre:
+    what a scan taken there could be matched against. Occlusion is ignored."""
+    i, j = np.nonzero(field.values >= _field_at(1.0, config))
+    xy = _cell_centres(np.stack([i, j], axis=1), field.pad_cells, field.resolution_m)
     d = xy - (pose.x_m, pose.y_m)
     r = np.hypot(d[:, 0], d[:, 1])
     keep = (r >= min_range_m) & (r <= config.max_range_m)
@@ -225,9 +237,7 @@ class ScanMatcher:
         return cov + np.diag([c.min_std_m ** 2, c.min_std_m ** 2, math.radians(c.min_std_deg) ** 2])
 
     def _inlier_fraction(self, field: LikelihoodField, scan_xy: np.ndarray, pose: Pose2D) -> float:
-        w = self.config.hit_weight
-        near = math.log(w * math.exp(-2.0) + 1.0 - w)  # log-likelihood at 2σ
-        return float(np.mean(field.at(_to_world(scan_xy, pose)) >= near))
+        return float(np.mean(field.at(_to_world(scan_xy, pose)) >= _field_at(2.0, self.config)))
 
 
 def _edge_marginals(weights: np.ndarray) -> np.ndarray:
@@ -355,8 +365,8 @@ class PoseTracker:
         return c * x + s * y, -s * x + c * y
 
     def target_shift_m(self, range_m: float) -> float:
-        """One standard deviation of where a point ``range_m`` ahead lands, from the pose's
-        uncertainty: the largest position σ plus the heading σ's sweep at that range."""
+        """How far a point ``range_m`` ahead may land from where the pose puts it: the largest
+        position σ plus the heading σ's sweep at that range, an upper bound on that point's σ."""
         sxy = math.sqrt(float(np.linalg.eigvalsh(self.covariance[:2, :2])[-1]))
         return sxy + range_m * math.sqrt(float(self.covariance[2, 2]))
 

@@ -14,7 +14,8 @@ the map of *earlier* frames) and then the shared :class:`~offboard.perception.oc
 with the corrected pose). Motions are planned in the corrected world frame and sent as odometry-frame
 waypoints through the :class:`~offboard.navigation.localization.PoseTracker`. Driving into unmapped
 space, the look toward the motion has nothing to match: if the pose is then unsure, the head turns to
-where the map (the room's walls at least) holds the most structure in range, and looks there. A stall (the base touched
+where the map (the room's walls at least) holds the most structure in range, and looks there; so it
+does on arrival, before the search looks from the new pose. A stall (the base touched
 something stereo missed) marks the obstacle in the map and backs off. A goal the map shows blocked is
 approached until seen from close by (far obstacles are mapped thick).
 
@@ -267,7 +268,8 @@ class Navigator:
         return None
 
     def _next_waypoint(self, run: _Run, bug: TangentBug) -> tuple[Point | None, str]:
-        """Plan on the current map, look toward the motion, re-plan on the refreshed map."""
+        """Plan on the current map, look toward the motion (and for the map if the pose is still
+        unsure), re-plan on the refreshed map."""
         planned = self._plan(run, bug)
         if planned[0] is not None:
             pan = self._pan_toward(planned[0])
@@ -278,8 +280,9 @@ class Navigator:
         return planned
 
     def _relocalize(self, run: _Run) -> bool:
-        """If the pose is unsure, look where the map holds the most structure not looked at from here
-        (the walls are always mapped); whether it looked."""
+        """If the pose is unsure, look where the map holds the most structure in range (the walls are
+        always mapped), at a pan at least half the field of view from those this run has looked at
+        since its last motion; whether it looked."""
         c = self.config
         if (not c.localize or run.relocalizations >= c.max_relocalizations
                 or self.tracker.target_shift_m(c.relocalize_range_m) <= c.relocalize_shift_m):
@@ -398,8 +401,8 @@ class Navigator:
                 observed[region] = True
 
     def _result(self, run: _Run, status: Status, reason: str) -> NavigationResult:
-        log.info("navigation to (%.2f, %.2f): %s (%s) after %d steps, %.2f m", *run.goal, status, reason,
-                 run.steps, run.distance_m)
+        log.info("navigation to (%.2f, %.2f): %s (%s) after %d steps, %.2f m, %d looks for the map", *run.goal,
+                 status, reason, run.steps, run.distance_m, run.relocalizations)
         processing_s = time.perf_counter() - run.wall_start_s - (self.waiting_s - run.waiting_start_s)
         return NavigationResult(status, reason, self.pose, self._odom, run.distance_m,
                                 run.last_time_s - run.start_time_s, processing_s, run.steps, run.stalls,

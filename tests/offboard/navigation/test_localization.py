@@ -137,24 +137,31 @@ def test_map_field_uses_occupied_columns_and_walls():
 # --- fusion ----------------------------------------------------------------------------------------
 
 def test_structure_in_view_counts_what_a_scan_could_match_within_its_range():
-    """In the 9 × 5 m room, 1 m from the west wall and facing east: ahead the east wall is 8 m off,
-    beyond the scan's 4.5 m, so there is nothing to match until a mapped box stands there."""
-    pans = np.radians([-90.0, 0.0, 90.0, 180.0])
+    """In the 9 × 5 m room, 1 m from the west wall and facing east, with a 60° camera: straight ahead
+    the east wall is 8 m off and the side walls lie outside the view within the scan's 4.5 m, so
+    there is nothing to match until a mapped box stands there. Pans count to the left (from +x
+    toward +y) and turn with the robot."""
+    pans, hfov = np.radians([-90.0, -50.0, 0.0, 50.0, 90.0, 180.0]), math.radians(60.0)
     here = Pose2D(1.0, 2.5, 0.0)
-    walls = structure_in_view(likelihood_field(np.zeros((180, 100), bool), RES), here, pans, math.radians(66.0))
-    assert walls[1] == 0 and min(walls[0], walls[2], walls[3]) > 20
+    walls = structure_in_view(likelihood_field(np.zeros((180, 100), bool), RES), here, pans, hfov)
+    assert walls[2] == 0 and min(walls[0], walls[4], walls[5]) > 20
     occupied = np.zeros((180, 100), bool)
-    occupied[60:64, 40:60] = True  # a 1 m face 2 m ahead
-    boxed = structure_in_view(likelihood_field(occupied, RES), here, pans, math.radians(66.0))
-    assert boxed[1] >= 20 and np.array_equal(np.delete(boxed, 1), np.delete(walls, 1))
-    turned = structure_in_view(likelihood_field(occupied, RES), Pose2D(1.0, 2.5, math.pi), pans, math.radians(66.0))
-    assert turned[3] == boxed[1]  # pans turn with the robot
+    occupied[54:58, 80:90] = True  # a 0.5 m face at (2.8, 4.25): 44° to the left, 2.5 m away
+    boxed = structure_in_view(likelihood_field(occupied, RES), here, pans, hfov)
+    assert boxed[3] >= walls[3] + 20  # seen at 50° to the left, and nowhere else
+    assert np.array_equal(np.delete(boxed, 3), np.delete(walls, 3))
+    turned = structure_in_view(likelihood_field(occupied, RES), Pose2D(1.0, 2.5, math.pi / 2), pans - math.pi / 2, hfov)
+    assert np.array_equal(turned, boxed)
 
 
-def test_the_target_shift_grows_with_heading_uncertainty_times_range():
+def test_the_target_shift_bounds_the_sweep_of_a_point_at_range():
     tracker = PoseTracker(Pose2D(0.0, 0.0, 0.0), covariance=np.diag([0.04 ** 2, 0.01 ** 2, math.radians(2.0) ** 2]))
     assert tracker.target_shift_m(0.0) == pytest.approx(0.04)
     assert tracker.target_shift_m(3.0) == pytest.approx(0.04 + 3.0 * math.radians(2.0))
+    along_diagonal = np.array([[1.0, 0.99], [0.99, 1.0]]) * 0.03 ** 2  # x and y errors move together
+    correlated = PoseTracker(Pose2D(0.0, 0.0, 0.0), covariance=np.block([[along_diagonal, np.zeros((2, 1))],
+                                                                         [np.zeros((1, 2)), np.eye(1) * 1e-8]]))
+    assert correlated.target_shift_m(0.0) == pytest.approx(0.03 * math.sqrt(1.99), rel=1e-3)  # not σx
 
 
 def test_tracker_maps_odometry_to_world_and_back():
