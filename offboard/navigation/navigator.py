@@ -72,7 +72,7 @@ class NavigatorConfig:
     max_steps: int = 150
     max_distance_m: float = 60.0
     localize: bool = True  # correct odometry by scan matching (off: dead reckoning only)
-    # a pose this unsure (1σ of where a point relocalize_range_m ahead lands) after the look toward
+    # a pose this unsure (PoseTracker.target_shift_m at relocalize_range_m) after the look toward
     # the motion earns a look at mapped structure: driving into unmapped space, that look saw nothing
     # to match, and a heading error moves a target seen at the detector's range the farthest
     relocalize_shift_m: float = 0.15
@@ -284,8 +284,8 @@ class Navigator:
         always mapped), at a pan at least half the field of view from those this run has looked at
         since its last motion; whether it looked."""
         c = self.config
-        if (not c.localize or run.relocalizations >= c.max_relocalizations
-                or self.tracker.target_shift_m(c.relocalize_range_m) <= c.relocalize_shift_m):
+        shift_m = self.tracker.target_shift_m(c.relocalize_range_m)
+        if not c.localize or run.relocalizations >= c.max_relocalizations or shift_m <= c.relocalize_shift_m:
             return False
         hfov = self._intrinsics.hfov_rad
         pans = np.array([p for p in c.survey_pans_deg if all(abs(p - q) > math.degrees(hfov) / 2 for q in run.pans_here)
@@ -294,8 +294,8 @@ class Navigator:
             return False
         counts = structure_in_view(map_field(self.occupancy, c.match), self.pose, np.radians(pans), hfov, c.match)
         pan = float(pans[int(np.argmax(counts))])
-        log.debug("pose unsure (%.2f m at %.1f m): looking for the map at pan %.0f°",
-                  self.tracker.target_shift_m(c.relocalize_range_m), c.relocalize_range_m, pan)
+        log.debug("pose unsure (%.2f m at %.1f m): looking for the map at pan %.0f°", shift_m, c.relocalize_range_m,
+                  pan)
         run.relocalizations += 1
         run.last_time_s = self.sense(pan)
         run.pans_here.append(pan)
