@@ -302,6 +302,48 @@ def _scenario(row: dict) -> tuple:
     return row["world"], row["start"], row["target"], row["prior"], row["seed"]
 
 
+YARDSTICKS = ("oracle",)  # baselines given the truth: they bound what a search can reach, they are not rivals
+
+
+@dataclass(frozen=True)
+class SplMargin:
+    """SYT's SPL against one baseline's on the scenarios both ran (start × target × prior × seed), a
+    failure counting 0 on either side, as in the mean SPL."""
+
+    baseline: str
+    prior: str
+    scenarios: int
+    syt: float
+    theirs: float
+    stderr: float | None  # of the paired difference; None below two scenarios
+    by_seed: tuple[tuple[float, float], ...]  # (seed, difference)
+
+    @property
+    def difference(self) -> float:
+        return self.syt - self.theirs
+
+
+def spl_margins(rows: list[dict], cost: int = 3) -> list[SplMargin]:
+    """Per prior and baseline, SYT's paired SPL margin (``cost``): the issue's "SPL above the best
+    baseline's", with its standard error and its spread over seeds."""
+    syt = {_scenario(r): r["spl"] or 0.0 for r in rows if r["method"] == "syt" and r["cost"] == cost}
+    out = []
+    for prior in dict.fromkeys(r["prior"] for r in rows):
+        for name in dict.fromkeys(r["method"] for r in rows if r["method"] != "syt"):
+            theirs = {_scenario(r): r["spl"] or 0.0 for r in rows if r["method"] == name and r["prior"] == prior}
+            common = sorted(set(syt) & set(theirs), key=str)
+            if not common:
+                continue
+            diffs = [syt[s] - theirs[s] for s in common]
+            seeds = sorted({s[-1] for s in common})
+            by_seed = tuple((seed, statistics.fmean([d for s, d in zip(common, diffs) if s[-1] == seed]))
+                            for seed in seeds)
+            stderr = statistics.stdev(diffs) / math.sqrt(len(diffs)) if len(diffs) > 1 else None
+            out.append(SplMargin(name, prior, len(common), statistics.fmean(syt[s] for s in common),
+                                 statistics.fmean(theirs[s] for s in common), stderr, by_seed))
+    return out
+
+
 def paired_times(rows: list[dict], cost: int = 3) -> list[tuple[str, int, float | None, float | None]]:
     """Per baseline: (name, scenarios both found, SYT's mean robot minutes there, the baseline's)."""
     syt = {_scenario(r): r["time_min"] for r in rows if r["method"] == "syt" and r["cost"] == cost and r["success"]}
@@ -394,11 +436,33 @@ def _time_md(rows: list[dict]) -> list[str]:
     return lines + [""]
 
 
+def _margins_md(rows: list[dict]) -> list[str]:
+    margins = spl_margins(rows)
+    if not margins:
+        return []
+    lines = ["SPL of SYT with cost 3 against each baseline on the scenarios (start × target × prior × seed) both "
+             "ran, paired; a failure counts 0. The standard error is the paired difference's; per seed, the mean "
+             f"difference. {', '.join(YARDSTICKS).capitalize()} is given the truth: a ceiling, not a rival.", "",
+             "| Prior | Baseline | Scenarios | SYT SPL | Baseline SPL | SYT − baseline | Per seed |", "|---" * 7 + "|"]
+    for m in margins:
+        se = "" if m.stderr is None else f" ({m.stderr:.3f})"
+        seeds = ", ".join(f"{seed:g}: {d:+.3f}" for seed, d in m.by_seed)
+        lines.append(f"| {m.prior} | {m.baseline} | {m.scenarios} | {m.syt:.3f} | {m.theirs:.3f} | "
+                     f"{m.difference:+.3f}{se} | {seeds} |")
+    for prior in dict.fromkeys(m.prior for m in margins):
+        rivals = [m for m in margins if m.prior == prior and m.baseline not in YARDSTICKS]
+        if rivals:
+            best = max(rivals, key=lambda m: m.theirs)
+            lines += ["", f"Best baseline with prior `{prior}` ({', '.join(YARDSTICKS)} excluded): **{best.baseline}**, "
+                          f"SYT − it = **{best.difference:+.3f}**."]
+    return lines + [""]
+
+
 def _paired_md(rows: list[dict]) -> list[str]:
     pairs = paired_times(rows)
     if not pairs:
         return ["No baseline runs (`--baselines`).", ""]
-    lines = ["Mean robot time to find on the scenarios (start × target × prior × seed) that both SYT with cost 3 "
+    lines = _margins_md(rows) + ["Mean robot time to find on the scenarios (start × target × prior × seed) that both SYT with cost 3 "
              "and the baseline solved:", "", "| Baseline | Scenarios | SYT (min) | Baseline (min) | SYT ahead |",
              "|---" * 5 + "|"]
     for name, n, mine, theirs in pairs:

@@ -4,6 +4,7 @@ expected against realised P from each run's looks.jsonl."""
 from __future__ import annotations
 
 import json
+import statistics
 from pathlib import Path
 
 import pytest
@@ -11,7 +12,7 @@ import pytest
 from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, coverage, coverage_md, parse_look,
                                               read_looks)
 from offboard.experiments.harness import Run, make_row
-from offboard.experiments.report import COLUMNS, append_row, load_results, scope, write_report
+from offboard.experiments.report import COLUMNS, append_row, load_results, scope, spl_margins, write_report
 from offboard.experiments.world_facts import load_facts
 
 SUMMARY = {"found": True, "status": "found", "actions": 6, "positions_visited": 2, "distance_m": 3.0,
@@ -72,6 +73,28 @@ def test_the_report_has_a_table_per_world_times_apart_and_names_worlds_and_seeds
     assert "| 2.50 | 0.50 | 3.00 |" in office
     assert "about 15 s of processing per action" in text and "5.0 s of processing per action" in text
     assert "paper-lab, office; seeds 0,1" in text
+
+
+def test_the_spl_margin_pairs_scenarios_and_the_best_baseline_is_never_the_oracle(tmp_path):
+    results = tmp_path / "results.csv"
+    for seed in (0, 1, 2, 3):  # seed 3: SYT alone, so it has no pair and stays out of the margin
+        _row(results, "syt", "office", "uniform", seed, 100.0, 30.0, distance_m=0.0)
+    for seed in (0, 1, 2):
+        _row(results, "oracle", "office", "uniform", seed, 100.0, 30.0, distance_m=0.0)
+        _row(results, "exhaustive", "office", "uniform", seed, 100.0, 30.0, found=seed > 0, distance_m=8.0 + seed)
+    rows = load_results(results)
+    spl = {(r["method"], r["seed"]): r["spl"] or 0.0 for r in rows}
+    diffs = [spl["syt", s] - spl["exhaustive", s] for s in (0, 1, 2)]
+    assert spl["syt", 0] == 1.0 and 0 < spl["exhaustive", 1] < 1 and spl["exhaustive", 0] == 0
+    margin = {m.baseline: m for m in spl_margins(rows)}
+    assert margin["exhaustive"].scenarios == 3
+    assert margin["exhaustive"].difference == pytest.approx(sum(diffs) / 3)
+    assert margin["exhaustive"].stderr == pytest.approx(statistics.stdev(diffs) / 3 ** 0.5)
+    assert [d for _, d in margin["exhaustive"].by_seed] == pytest.approx(diffs)
+    assert margin["oracle"].difference == 0.0
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert f"Best baseline with prior `uniform` (oracle excluded): **exhaustive**, SYT − it = **{sum(diffs) / 3:+.3f}**" in text
 
 
 def test_processing_not_measured_is_said_and_not_summed(tmp_path):
