@@ -82,19 +82,24 @@ def test_the_spl_margin_pairs_scenarios_and_the_best_baseline_is_never_the_oracl
     for seed in (0, 1, 2):
         _row(results, "oracle", "office", "uniform", seed, 100.0, 30.0, distance_m=0.0)
         _row(results, "exhaustive", "office", "uniform", seed, 100.0, 30.0, found=seed > 0, distance_m=8.0 + seed)
+    _row(results, "syt", "office", "tables", 1, 100.0, 30.0, distance_m=0.0)  # baselines ran with uniform only
     rows = load_results(results)
     spl = {(r["method"], r["seed"]): r["spl"] or 0.0 for r in rows}
     diffs = [spl["syt", s] - spl["exhaustive", s] for s in (0, 1, 2)]
     assert spl["syt", 0] == 1.0 and 0 < spl["exhaustive", 1] < 1 and spl["exhaustive", 0] == 0
-    margin = {m.baseline: m for m in spl_margins(rows)}
+    margin = {m.baseline: m for m in spl_margins(rows) if m.prior == "uniform"}
     assert margin["exhaustive"].scenarios == 3
     assert margin["exhaustive"].difference == pytest.approx(sum(diffs) / 3)
     assert margin["exhaustive"].stderr == pytest.approx(statistics.stdev(diffs) / 3 ** 0.5)
     assert [d for _, d in margin["exhaustive"].by_seed] == pytest.approx(diffs)
     assert margin["oracle"].difference == 0.0
+    tables = {m.baseline: m for m in spl_margins(rows) if m.prior == "tables"}
+    assert tables["exhaustive"].their_prior == "uniform" and tables["exhaustive"].scenarios == 1
+    assert tables["exhaustive"].difference == pytest.approx(diffs[1])
     write_report(results, tmp_path)
     text = (tmp_path / "report.md").read_text()
-    assert f"Best baseline with prior `uniform` (oracle excluded): **exhaustive**, SYT − it = **{sum(diffs) / 3:+.3f}**" in text
+    assert ("SYT with prior `uniform`: the best baseline (oracle excluded) is **exhaustive** (prior `uniform`), "
+            f"SYT − it = **{sum(diffs) / 3:+.3f}**") in text
 
 
 def test_processing_not_measured_is_said_and_not_summed(tmp_path):
