@@ -345,9 +345,53 @@ def spl_margins(rows: list[dict], cost: int = 3) -> list[SplMargin]:
             diffs = [syt[s] - theirs[s] for s in common]
             by_seed = tuple((seed, statistics.fmean([d for s, d in zip(common, diffs) if s[-1] == seed]))
                             for seed in sorted({s[-1] for s in common}))
-            stderr = statistics.stdev(diffs) / math.sqrt(len(diffs)) if len(diffs) > 1 else None
             out.append(SplMargin(name, prior, their_prior, len(common), statistics.fmean(syt[s] for s in common),
-                                 statistics.fmean(theirs[s] for s in common), stderr, by_seed))
+                                 statistics.fmean(theirs[s] for s in common), _stderr(diffs), by_seed))
+    return out
+
+
+def _stderr(diffs: list[float]) -> float | None:
+    """The standard error of the mean of paired differences; None below two pairs."""
+    return statistics.stdev(diffs) / math.sqrt(len(diffs)) if len(diffs) > 1 else None
+
+
+@dataclass(frozen=True)
+class PriorGain:
+    """SYT with one prior against SYT with the reference prior, same cost, on the scenarios both ran
+    (world × start × target × seed): SPL over all of them (a failure counts 0), looks over those both found."""
+
+    cost: float
+    prior: str
+    reference: str
+    scenarios: int
+    spl: float
+    reference_spl: float
+    stderr: float | None  # of the paired SPL difference
+    found_both: int
+    looks: float | None
+    reference_looks: float | None
+
+    @property
+    def difference(self) -> float:
+        return self.spl - self.reference_spl
+
+
+def prior_gains(rows: list[dict], reference: str = "uniform") -> list[PriorGain]:
+    """What each prior buys SYT over ``reference``, paired per scenario: the issue's priors "against
+    uniform, reported as SPL and looks"."""
+    syt = {(r["cost"], r["prior"], r["world"], r["start"], r["target"], r["seed"]): r
+           for r in rows if r["method"] == "syt"}
+    out = []
+    for cost, prior in dict.fromkeys(key[:2] for key in syt):
+        pairs = [(run, syt[(cost, reference, *key[2:])]) for key, run in syt.items()
+                 if key[:2] == (cost, prior) and (cost, reference, *key[2:]) in syt]
+        if prior == reference or not pairs:
+            continue
+        both = [(a["actions"], b["actions"]) for a, b in pairs if a["success"] and b["success"]]
+        out.append(PriorGain(cost, prior, reference, len(pairs), statistics.fmean(a["spl"] or 0.0 for a, _ in pairs),
+                             statistics.fmean(b["spl"] or 0.0 for _, b in pairs),
+                             _stderr([(a["spl"] or 0.0) - (b["spl"] or 0.0) for a, b in pairs]), len(both),
+                             _mean([a for a, _ in both]), _mean([b for _, b in both])))
     return out
 
 
@@ -421,6 +465,22 @@ def _priors_md(rows: list[dict]) -> list[str]:
                 s = _stats(prior, members)
                 lines.append(f"| {cost:g} | {prior} | {s.runs} | {100 * s.success_rate:.1f}% | {cell(s.spl, 3)} | "
                              f"{cell(s.actions, 1)} | {cell(s.distance_m)} | {s.scope} |")
+    return lines + [""] + _gains_md(rows)
+
+
+def _gains_md(rows: list[dict]) -> list[str]:
+    gains = prior_gains(rows)
+    if not gains:
+        return []
+    lines = ["Each prior against `uniform` on the same scenarios (world × start × target × seed) and cost, paired: "
+             "SPL over all (a failure counts 0; the standard error is the paired difference's), looks over the "
+             "scenarios both found.", "",
+             "| Cost | Prior | Scenarios | SPL | SPL with `uniform` | Difference | Both found | Looks | "
+             "Looks with `uniform` |", "|---" * 9 + "|"]
+    for g in gains:
+        se = "" if g.stderr is None else f" ({g.stderr:.3f})"
+        lines.append(f"| {g.cost:g} | {g.prior} | {g.scenarios} | {g.spl:.3f} | {g.reference_spl:.3f} | "
+                     f"{g.difference:+.3f}{se} | {g.found_both} | {cell(g.looks, 1)} | {cell(g.reference_looks, 1)} |")
     return lines + [""]
 
 

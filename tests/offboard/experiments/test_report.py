@@ -12,7 +12,8 @@ import pytest
 from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, coverage, coverage_md, parse_look,
                                               read_looks)
 from offboard.experiments.harness import Run, make_row
-from offboard.experiments.report import COLUMNS, append_row, load_results, scope, spl_margins, write_report
+from offboard.experiments.report import (COLUMNS, append_row, load_results, prior_gains, scope, spl_margins,
+                                         write_report)
 from offboard.experiments.world_facts import load_facts
 
 SUMMARY = {"found": True, "status": "found", "actions": 6, "positions_visited": 2, "distance_m": 3.0,
@@ -118,8 +119,29 @@ def test_priors_are_shown_side_by_side(tmp_path):
         _row(results, "syt", "office", prior, 0, 100.0, 30.0)
     write_report(results, tmp_path)
     section = (tmp_path / "report.md").read_text().split("## Priors side by side (SYT)")[1].split("\n## ")[0]
-    rows = [line for line in section.splitlines() if line.startswith("| 3 |")]
+    side_by_side, paired = section.split("Each prior against `uniform`")
+    rows = [line for line in side_by_side.splitlines() if line.startswith("| 3 |")]
     assert [line.split(" | ")[1] for line in rows] == ["uniform", "tables", "surfaces", "saliency"]
+    assert [line.split(" | ")[1] for line in paired.splitlines() if line.startswith("| 3 |")] == [
+        "tables", "surfaces", "saliency"]
+
+
+def test_each_prior_is_paired_with_uniform_on_the_same_scenarios(tmp_path):
+    results = tmp_path / "results.csv"
+    for seed, actions in ((0, 10), (1, 20)):
+        _row(results, "syt", "office", "uniform", seed, 100.0, 30.0, actions=actions)
+    _row(results, "syt", "office", "surfaces", 0, 100.0, 30.0, actions=4)
+    _row(results, "syt", "office", "surfaces", 1, 100.0, 30.0, found=False, status="exhausted")  # counts SPL 0
+    _row(results, "syt", "office", "saliency", 2, 100.0, 30.0)  # no uniform run to pair with
+    rows = load_results(results)
+    spl = {(r["prior"], r["seed"]): r["spl"] for r in rows}
+    [gain] = prior_gains(rows)
+    assert (gain.prior, gain.scenarios, gain.found_both) == ("surfaces", 2, 1)
+    assert gain.difference == pytest.approx((spl["surfaces", 0] - spl["uniform", 0] - spl["uniform", 1]) / 2)
+    assert (gain.looks, gain.reference_looks) == (4, 10)  # looks only where both found it
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert f"| 3 | surfaces | 2 | {gain.spl:.3f} | {gain.reference_spl:.3f} | {gain.difference:+.3f} (" in text
 
 
 def test_the_calibration_bins_looks_and_checks_each_bin_with_enough_looks(tmp_path):
