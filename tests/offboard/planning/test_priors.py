@@ -1,0 +1,56 @@
+"""The dynamic priors (report §3.4 types 2 and 4): what each raises, and that the map-driven one does
+not raise the same surface again."""
+
+import numpy as np
+import pytest
+
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.perception.voxel_grid import VoxelGrid
+from offboard.planning.priors import Saliency, SupportSurfaces
+from shared.geometry import Intrinsics, RigidTransform
+
+K = Intrinsics.from_fov(320, 240, 66.0)
+CAMERA = RigidTransform(np.eye(3), np.zeros(3))  # at the origin, looking along +z
+FRONT = VoxelGrid((1.0, 1.0, 0.5), 0.1, origin_m=(-0.5, -0.5, 1.0))  # a slab of cubes in front of it
+ALL = np.arange(FRONT.num_cubes)
+
+
+def _picture() -> np.ndarray:
+    """Saturated red and blue squares: colours a grey wall never has."""
+    tiles = (np.add.outer(np.arange(48) // 8, np.arange(48) // 8) % 2).astype(bool)
+    picture = np.zeros((48, 48, 3), np.uint8)
+    picture[tiles] = (220, 30, 30)
+    picture[~tiles] = (30, 30, 220)
+    return picture
+
+
+def _wall(with_picture: bool) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    image = np.repeat(rng.integers(90, 140, (K.height_px, K.width_px, 1), dtype=np.uint8), 3, axis=2)
+    if with_picture:
+        image[96:144, 136:184] = _picture()  # around the image centre
+    return image
+
+
+def test_saliency_raises_the_cubes_seen_where_the_image_looks_like_the_target():
+    factor = Saliency((_picture(),)).factor(_wall(True), FRONT, ALL, CAMERA, K)
+    centre = factor[4:6, 4:6].min()  # the cubes on the optical axis
+    corners = np.concatenate([factor[:2, :2].ravel(), factor[-2:, -2:].ravel()])
+    assert centre > 1.5 and corners.max() < 1.05 and factor.min() >= 1.0
+    assert np.all(Saliency((_picture(),)).factor(_wall(False), FRONT, ALL, CAMERA, K) == pytest.approx(1.0, abs=1e-3))
+
+
+
+def test_the_space_above_a_mapped_table_is_raised_once():
+    grid = VoxelGrid((1.0, 1.0, 1.5), 0.1)
+    occupancy = OccupancyGrid(grid)
+    with occupancy.edit() as (log_odds, observed):
+        observed[:] = True
+        log_odds[:] = -2.0  # free
+        log_odds[2:6, 2:6, 7] = 3.0  # a 0.4 m table top at 0.7-0.8 m
+    support = SupportSurfaces(grid)
+    factor = support.update(occupancy)
+    boost = support.config.boost
+    assert np.all(factor[2:6, 2:6, 8:11] == boost)  # the 0.3 m above its top
+    assert np.all(factor[2:6, 2:6, 11:] == 1.0) and np.all(factor[7:, 7:, :] == 1.0)
+    assert np.all(support.update(occupancy) == 1.0)  # the same map again: nothing new
