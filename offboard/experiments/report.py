@@ -605,12 +605,21 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
     lines += coverage_md(coverage(list(zip(looks, found_at))), source)
     lines += localisation_md(every_look, source)
     lines += ["## SYT against the baselines", ""] + _paired_md(rows)
-    lines += ["## The report's six conclusions", ""]
-    for i, v in enumerate(conclusions(ours), 1):
-        verdict = {True: "**agrees**", False: "**does not agree**", None: "**cannot tell** (a cell has no success)"}
-        lines.append(f"{i}. {v.claim} — {verdict[v.agrees]}: {v.evidence}.")
+    lines += ["## The report's six conclusions", ""] + _conclusions_md(syt, ours)
     lines += [""] + _wall_md(rows, sweep) + ["## Plots", ""] + [f"![{p}]({p})" for p in PLOTS] + [""]
     return "\n".join(lines)
+
+
+def _conclusions_md(syt: list[dict], ours: Tables) -> list[str]:
+    """Each conclusion's verdict, or, when the sweep did not run all eight cells (costs 1-4, with and
+    without knowledge) they compare, one line saying so instead of six that cannot tell."""
+    ran = {(r["cost"], r["prior"]) for r in syt}
+    missing = [(c, p) for p in PRIORS for c in COSTS if (c, p) not in ran]
+    if missing:
+        return [f"Not checked: they compare SYT with costs 1-4, with and without knowledge, and this sweep did not "
+                f"run {', '.join(f'cost {c} with `{p}`' for c, p in missing)} (`--preset paper` runs them all)."]
+    verdict = {True: "**agrees**", False: "**does not agree**", None: "**cannot tell** (a cell has no success)"}
+    return [f"{i}. {v.claim} — {verdict[v.agrees]}: {v.evidence}." for i, v in enumerate(conclusions(ours), 1)]
 
 
 # --- plots -----------------------------------------------------------------------------------------

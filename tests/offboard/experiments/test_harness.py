@@ -193,7 +193,7 @@ def test_the_checks_agree_with_the_report_and_notice_a_contradiction():
     swapped = {"uniform": {m: list(v) for m, v in REPORT["tables"].items()},
                "tables": {m: list(v) for m, v in REPORT["uniform"].items()}}
     assert conclusions(swapped)[0].agrees is False and conclusions(swapped)[4].agrees is False
-    assert render([]).count("**cannot tell**") == 6
+    assert "Not checked" in render([]) and "cost 4 with `tables`" in render([]) and "**cannot tell**" not in render([])
 
 
 # --- the baselines ---------------------------------------------------------------------------------
