@@ -302,6 +302,11 @@ def _scenario(row: dict) -> tuple:
     return row["world"], row["start"], row["target"], row["prior"], row["seed"]
 
 
+def _placement(row: dict) -> tuple:
+    """What two methods or two priors are paired on: world, start, target and seed (the seed last)."""
+    return row["world"], row["start"], row["target"], row["seed"]
+
+
 YARDSTICKS = ("oracle",)  # baselines given the truth: they bound what a search can reach, they are not rivals
 
 
@@ -329,7 +334,7 @@ def spl_margins(rows: list[dict], cost: int = 3) -> list[SplMargin]:
     baseline's", with its standard error and its spread over seeds. A baseline that never ran with
     SYT's prior is paired by its runs with the one prior it ran with, which the margin names."""
     def spl(method: str, prior: str) -> dict[tuple, float]:
-        return {(r["world"], r["start"], r["target"], r["seed"]): r["spl"] or 0.0 for r in rows
+        return {_placement(r): r["spl"] or 0.0 for r in rows
                 if r["method"] == method and r["prior"] == prior and (method != "syt" or r["cost"] == cost)}
 
     out = []
@@ -353,6 +358,11 @@ def spl_margins(rows: list[dict], cost: int = 3) -> list[SplMargin]:
 def _stderr(diffs: list[float]) -> float | None:
     """The standard error of the mean of paired differences; None below two pairs."""
     return statistics.stdev(diffs) / math.sqrt(len(diffs)) if len(diffs) > 1 else None
+
+
+def _difference_md(difference: float, stderr: float | None) -> str:
+    """A paired difference for a table cell, its standard error in brackets when there is one."""
+    return f"{difference:+.3f}" + ("" if stderr is None else f" ({stderr:.3f})")
 
 
 @dataclass(frozen=True)
@@ -379,8 +389,7 @@ class PriorGain:
 def prior_gains(rows: list[dict], reference: str = "uniform") -> list[PriorGain]:
     """What each prior buys SYT over ``reference``, paired per scenario: the issue's priors "against
     uniform, reported as SPL and looks"."""
-    syt = {(r["cost"], r["prior"], r["world"], r["start"], r["target"], r["seed"]): r
-           for r in rows if r["method"] == "syt"}
+    syt = {(r["cost"], r["prior"], *_placement(r)): r for r in rows if r["method"] == "syt"}
     out = []
     for cost, prior in dict.fromkeys(key[:2] for key in syt):
         pairs = [(run, syt[(cost, reference, *key[2:])]) for key, run in syt.items()
@@ -478,9 +487,9 @@ def _gains_md(rows: list[dict]) -> list[str]:
              "| Cost | Prior | Scenarios | SPL | SPL with `uniform` | Difference | Both found | Looks | "
              "Looks with `uniform` |", "|---" * 9 + "|"]
     for g in gains:
-        se = "" if g.stderr is None else f" ({g.stderr:.3f})"
         lines.append(f"| {g.cost:g} | {g.prior} | {g.scenarios} | {g.spl:.3f} | {g.reference_spl:.3f} | "
-                     f"{g.difference:+.3f}{se} | {g.found_both} | {cell(g.looks, 1)} | {cell(g.reference_looks, 1)} |")
+                     f"{_difference_md(g.difference, g.stderr)} | {g.found_both} | {cell(g.looks, 1)} | "
+                     f"{cell(g.reference_looks, 1)} |")
     return lines + [""]
 
 
@@ -512,13 +521,13 @@ def _margins_md(rows: list[dict]) -> list[str]:
              "it ran with (its tours do not read the prior; only its candidate viewpoints do). The standard error is "
              f"the paired difference's; per seed, the mean difference. {', '.join(YARDSTICKS).capitalize()} is given "
              "the truth: a ceiling, not a rival.", "",
-             "| SYT's prior | Baseline (its prior) | Scenarios | SYT SPL | Baseline SPL | SYT − baseline | Per seed |",
+             "| SYT's prior | Baseline (its prior) | Scenarios | SYT SPL | Baseline SPL | SYT − baseline | "
+             "Per seed |",
              "|---" * 7 + "|"]
     for m in margins:
-        se = "" if m.stderr is None else f" ({m.stderr:.3f})"
         seeds = ", ".join(f"{seed:g}: {d:+.3f}" for seed, d in m.by_seed)
         lines.append(f"| {m.prior} | {m.baseline} ({m.their_prior}) | {m.scenarios} | {m.syt:.3f} | {m.theirs:.3f} | "
-                     f"{m.difference:+.3f}{se} | {seeds} |")
+                     f"{_difference_md(m.difference, m.stderr)} | {seeds} |")
     for prior in dict.fromkeys(m.prior for m in margins):
         rivals = [m for m in margins if m.prior == prior and m.baseline not in YARDSTICKS]
         if rivals:
@@ -532,7 +541,8 @@ def _paired_md(rows: list[dict]) -> list[str]:
     pairs = paired_times(rows)
     if not pairs:
         return ["No baseline runs (`--baselines`).", ""]
-    lines = _margins_md(rows) + ["Mean robot time to find on the scenarios (start × target × prior × seed) that both SYT with cost 3 "
+    lines = _margins_md(rows) + [
+             "Mean robot time to find on the scenarios (start × target × prior × seed) that both SYT with cost 3 "
              "and the baseline solved:", "", "| Baseline | Scenarios | SYT (min) | Baseline (min) | SYT ahead |",
              "|---" * 5 + "|"]
     for name, n, mine, theirs in pairs:

@@ -40,7 +40,6 @@ def test_saliency_raises_the_cubes_seen_where_the_image_looks_like_the_target():
     assert np.all(Saliency((_picture(),)).factor(_wall(False), FRONT, ALL, CAMERA, K) == pytest.approx(1.0, abs=1e-3))
 
 
-
 def test_the_space_above_a_mapped_table_is_raised_once():
     grid = VoxelGrid((1.0, 1.0, 1.5), 0.1)
     occupancy = OccupancyGrid(grid)
