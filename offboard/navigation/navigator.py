@@ -14,8 +14,9 @@ the map of *earlier* frames) and then the shared :class:`~offboard.perception.oc
 with the corrected pose). Motions are planned in the corrected world frame and sent as odometry-frame
 waypoints through the :class:`~offboard.navigation.localization.PoseTracker`. Driving into unmapped
 space, the look toward the motion has nothing to match: if the pose is then unsure, the head turns to
-where the map (the room's walls at least) holds the most structure in range, and looks there; so it
-does on arrival, before the search looks from the new pose. A stall (the base touched
+where the map (the room's walls at least) holds the most structure in range, and looks there, before
+the look toward the motion is mapped with the pose it corrected; so it does on arrival, before the
+search looks from the new pose. A stall (the base touched
 something stereo missed) marks the obstacle in the map and backs off. A goal the map shows blocked is
 approached until seen from close by (far obstacles are mapped thick).
 
@@ -99,6 +100,16 @@ class NavigationResult:
     matches_tried: int
 
 
+@dataclass(frozen=True)
+class _Frame:
+    """A stereo frame captured and localised, waiting to be mapped."""
+
+    disparity: np.ndarray
+    pan_rad: float
+    tilt_rad: float
+    robot_time_s: float  # robot clock at capture
+
+
 @dataclass
 class _Run:
     goal: Point
@@ -164,19 +175,29 @@ class Navigator:
 
     def sense(self, pan_deg: float, tilt_deg: float | None = None) -> float:
         """Look, capture, localise against the map so far, then add the frame to the map; robot time."""
+        frame = self._look(pan_deg, tilt_deg)
+        self._map(frame)
+        return frame.robot_time_s
+
+    def _look(self, pan_deg: float, tilt_deg: float | None = None) -> _Frame:
+        """Look, capture and localise against the map so far; the frame is not mapped yet."""
         tilt = self.config.look_tilt_deg if tilt_deg is None else tilt_deg
         pan = float(np.clip(pan_deg, self._pantilt.pan_min_deg, self._pantilt.pan_max_deg))
         self._command(self.robot.look, pan, tilt)
         capture = self._command(self.robot.capture)
-        disparity = self._stereo.disparity(capture.left, capture.right)
+        frame = _Frame(self._stereo.disparity(capture.left, capture.right), math.radians(capture.pan_deg),
+                       math.radians(capture.tilt_deg), capture.robot_time_s)
         self._odom = capture.pose.to_pose()
-        pan_rad, tilt_rad = math.radians(capture.pan_deg), math.radians(capture.tilt_deg)
         self.tracker.predict(self._odom)
         if self.config.localize:
-            self._localize(disparity, pan_rad, tilt_rad)
-        camera = self._mount.camera_in_world(self.pose, pan_rad, tilt_rad)
-        self.occupancy.integrate_disparity(disparity, self._intrinsics, self._mount.baseline_m, camera)
-        return capture.robot_time_s
+            self._localize(frame.disparity, frame.pan_rad, frame.tilt_rad)
+        return frame
+
+    def _map(self, frame: _Frame) -> None:
+        """Add a frame to the map, placed with the pose as corrected now (the base has not moved since
+        it was captured: only the head turns between looks)."""
+        camera = self._mount.camera_in_world(self.pose, frame.pan_rad, frame.tilt_rad)
+        self.occupancy.integrate_disparity(frame.disparity, self._intrinsics, self._mount.baseline_m, camera)
 
     def survey(self, tilt_deg: float | None = None) -> float:
         """Look all round (pan sweep) from where the robot stands; robot time at the end."""
@@ -273,9 +294,11 @@ class Navigator:
         planned = self._plan(run, bug)
         if planned[0] is not None:
             pan = self._pan_toward(planned[0])
-            run.last_time_s = self.sense(pan)
+            frame = self._look(pan)
+            run.last_time_s = frame.robot_time_s
             run.pans_here.append(pan)
-            self._relocalize(run)
+            self._relocalize(run)  # the look ahead, into unmapped space, may have had nothing to match
+            self._map(frame)  # so it is mapped with the pose the look for the map corrected
             planned = self._plan(run, bug)
         return planned
 

@@ -155,5 +155,20 @@ def test_an_unsure_pose_looks_for_mapped_structure_when_the_way_ahead_is_unmappe
     error_deg = abs(math.degrees(wrap_angle(result.pose.heading_rad - math.radians(truth.heading_deg))))
     if relocalize:
         assert error_deg < 1.5 and result.matches_accepted >= 1
+        # the look ahead saw the U before the look at the walls corrected the pose: it is mapped
+        # with the corrected pose, not 8° round (0.4 m off at the U's back)
+        assert misplaced_u_columns(navigator.occupancy) == 0
     else:
         assert error_deg > 5.0
+
+
+def misplaced_u_columns(occupancy: OccupancyGrid, tolerance_m: float = 0.15) -> int:
+    """Occupied columns (0.2–0.7 m up) around the U that lie farther than ``tolerance_m`` from it."""
+    res = occupancy.grid.resolution_m
+    columns = occupancy.occupied()[:, :, round(0.2 / res):round(0.7 / res)].any(axis=2)
+    x, y = (np.argwhere(columns) + 0.5).T * res
+    near_u = (x > 2.5) & (x < 5.0) & (y > 0.5) & (y < 3.5)
+    boxes = [(lo, hi) for name, (_, lo, hi) in OBSTACLES.items() if name.startswith("u-")]
+    gap = np.min([np.hypot(np.clip(x, lo[0], hi[0]) - x, np.clip(y, lo[1], hi[1]) - y) for lo, hi in boxes], axis=0)
+    return int(np.sum(near_u & (gap > tolerance_m)))
+
