@@ -304,8 +304,8 @@ class Navigator:
 
     def _relocalize(self, run: _Run) -> bool:
         """If the pose is unsure, look where the map holds the most structure in range (the walls are
-        always mapped), at a pan at least half the field of view from those this run has looked at
-        since its last motion; whether it looked."""
+        always mapped, but may all be out of range in a large room), at a pan at least half the field
+        of view from those this run has looked at since its last motion; whether it looked."""
         c = self.config
         shift_m = self.tracker.target_shift_m(c.relocalize_range_m)
         if not c.localize or run.relocalizations >= c.max_relocalizations or shift_m <= c.relocalize_shift_m:
@@ -316,6 +316,8 @@ class Navigator:
         if pans.size == 0:
             return False
         counts = structure_in_view(map_field(self.occupancy, c.match), self.pose, np.radians(pans), hfov, c.match)
+        if counts.max() == 0:
+            return False  # nothing mapped in range to match a scan against: the look would be wasted
         pan = float(pans[int(np.argmax(counts))])
         log.debug("pose unsure (%.2f m at %.1f m): looking for the map at pan %.0f°", shift_m, c.relocalize_range_m,
                   pan)

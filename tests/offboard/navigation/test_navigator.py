@@ -172,3 +172,17 @@ def misplaced_u_columns(occupancy: OccupancyGrid, tolerance_m: float = 0.15) -> 
     gap = np.min([np.hypot(np.clip(x, lo[0], hi[0]) - x, np.clip(y, lo[1], hi[1]) - y) for lo, hi in boxes], axis=0)
     return int(np.sum(near_u & (gap > tolerance_m)))
 
+
+def test_an_unsure_pose_wastes_no_look_where_no_structure_is_in_range(tmp_path):
+    """In the middle of an empty 12 × 12 m room every wall lies beyond the scan's 4.5 m: there is
+    nothing a look could be matched against, so the unsure robot drives on with one look per step."""
+    world = tmp_path / "hall.toml"
+    world.write_text(WORLD.format(obstacles="").replace("[8.0, 6.0, 2.5]", "[12.0, 12.0, 2.5]")
+                     .replace("[1.5, 2.0]", "[6.0, 6.0]"))
+    with running_agent(tmp_path, "--world", str(world)) as (_, robot):
+        odom = robot.state().pose.to_pose()
+        tracker = PoseTracker(odom, covariance=np.diag([0.02 ** 2, 0.02 ** 2, math.radians(5.0) ** 2]))
+        navigator = Navigator(robot, OccupancyGrid(VoxelGrid((12.0, 12.0, 2.5), 0.05)), tracker)
+        result = navigator.go_to((6.6, 6.0))
+    assert result.status == "reached"
+    assert navigator.matches_tried == result.steps
