@@ -61,7 +61,7 @@ def _hardware(realtime: bool) -> Iterator[Rig]:
     with EmulatedRobot(base, _world(), "paper-lab") as emulated:
         ports = emulated.ports()
         config = dataclasses.replace(base, backend="hardware", hardware=HardwareConfig(
-            PioneerConfig(port=ports["base"]), PtuConfig(port=ports["pantilt"], reply_timeout_s=0.2),
+            PioneerConfig(port=ports["base"]), PtuConfig(port=ports["pantilt"]),
             truth=ports["truth"]))
         robot = build_robot(config, _world())
         try:
