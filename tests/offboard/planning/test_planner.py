@@ -292,7 +292,7 @@ def test_a_sweep_of_the_head_starts_at_the_nearer_end_and_stops_at_each_look():
 def test_staying_is_worth_the_looks_along_one_sweep_not_only_the_best_single_look():
     """The best look here is a long slew away, and lesser looks lie on the way: the far look alone
     is worth little per second, but the sweep that takes them all is worth more. Staying is valued
-    at the sweep (the looks taken by value, as a visit's are): that is what a visit must beat."""
+    at the sweep (the looks taken by value, as a visit's are), so the robot does not leave it."""
     planner = _planner(3)
     s = planner.settings
     flat = np.flatnonzero(s.tilt_rad == 0.0)
