@@ -64,7 +64,7 @@ class PlannerConfig:
     max_vertices: int = field(default=40, metadata=bounds(1, 10_000))  # the grid vertices nearest the robot
     viewpoints: int = field(default=24, metadata=bounds(0, 1000))  # aimed at the belief, per decision
     viewpoint_lattice_m: float = field(default=0.25, metadata=bounds(0.05, 2.0))  # they snap to it (cached geometry)
-    visit_looks: int = field(default=4, metadata=bounds(1, 64))  # the most looks a visit (or staying) is credited with
+    visit_looks: int = field(default=4, metadata=bounds(1, 64))  # the most looks a visit is credited with
     leave_margin: float = field(default=2.0, metadata=bounds(1.0, 100.0))  # the "rate" rule leaves when a visit
     # finds this many times more per second than staying here
     tilts_deg: tuple[float, ...] = (0.0, 30.0)  # the report's two tilts
@@ -166,7 +166,8 @@ class SearchPlanner:
         if self.config.cost_function == 1:
             decision = self._eq9(values, look_t, far_t, here_covering, pose)
         else:
-            move, why, worth = self._why_move(values, look_t, path_lengths_m, here_covering, pose, pan_rad, tilt_rad)
+            move, why, worth = self._why_move(values, look_t, far_t, path_lengths_m, here_covering, pose,
+                                              pan_rad, tilt_rad)
             decision = (self._move(values, far_t, path_lengths_m, here_covering, pose, why, worth) if move else
                         self._look_here(values, look_t, here_covering, why))
         if elapsed_s + decision.time_s > self.config.budget_s:
@@ -177,8 +178,8 @@ class SearchPlanner:
 
     # --- the pieces --------------------------------------------------------------------------------
 
-    def _why_move(self, values: ActionValues, look_t: np.ndarray, path_lengths_m: np.ndarray, covering: float,
-                  pose: Pose2D, pan_rad: float, tilt_rad: float) -> tuple[bool, str, np.ndarray]:
+    def _why_move(self, values: ActionValues, look_t: np.ndarray, far_t: np.ndarray, path_lengths_m: np.ndarray,
+                  covering: float, pose: Pose2D, pan_rad: float, tilt_rad: float) -> tuple[bool, str, np.ndarray]:
         """Whether to leave the current position and why (the ``move_rule``), and which candidates
         are worth going to: those the robot would not leave again at once."""
         here = values.detection_prob[-1]
@@ -188,7 +189,7 @@ class SearchPlanner:
             why = f"covering probability here {covering:.3f} {'<' if move else '≥'} Θ_move {self.config.move_threshold:g}"
         else:
             here_rate = max(float((here / look_t).max()), self._stay_rate(here, pose, pan_rad, tilt_rad, covering))
-            visit = self._visit_rates(path_lengths_m, values, pose)
+            visit = self._visit_rates(values, far_t, path_lengths_m, pose)
             worth = visit > here_rate * self.config.leave_margin
             j = int(np.argmax(visit))
             move = bool(worth[j])
@@ -205,14 +206,16 @@ class SearchPlanner:
         return float(self._best_looks_rate(here[None], np.array([pose.heading_rad]), pan_rad, tilt_rad,
                                            np.zeros(1), np.array([covering]))[0])
 
-    def _visit_rates(self, path_lengths_m: np.ndarray, values: ActionValues, pose: Pose2D) -> np.ndarray:
+    def _visit_rates(self, values: ActionValues, far_t: np.ndarray, path_lengths_m: np.ndarray,
+                     pose: Pose2D) -> np.ndarray:
         """Per candidate: the best detection per second of a visit — travel there, then its best k
-        looks (from the heading on arrival, as in :meth:`_candidate_times`)."""
-        arrival, travel = self._arrival(pose, path_lengths_m)
-        reachable = np.isfinite(travel) & self._away(pose)
+        looks (heading on arrival as in :meth:`_candidate_times`)."""
+        reachable = np.isfinite(np.asarray(path_lengths_m, float)) & np.isfinite(far_t).all(axis=1) & self._away(pose)
+        travel = far_t[reachable].min(axis=1) - self.time_model.image_s  # driving there, the first look's slew aside
+        arrival = np.arctan2(self.positions[reachable, 1] - pose.y_m, self.positions[reachable, 0] - pose.x_m)
         rates = np.zeros(len(self.positions))
-        rates[reachable] = self._best_looks_rate(values.detection_prob[:-1][reachable], arrival[reachable], 0.0, 0.0,
-                                                 travel[reachable], values.covering_prob[:-1][reachable])
+        rates[reachable] = self._best_looks_rate(values.detection_prob[:-1][reachable], arrival, 0.0, 0.0, travel,
+                                                 values.covering_prob[:-1][reachable])
         return rates
 
     def _best_looks_rate(self, detection: np.ndarray, heading_rad: np.ndarray, pan_rad: float, tilt_rad: float,
@@ -249,20 +252,15 @@ class SearchPlanner:
                             np.concatenate([r.covering_prob for r in rows]))
 
     def _candidate_times(self, pose: Pose2D, path_lengths_m: np.ndarray) -> np.ndarray:
-        """t(f) of every (candidate, setting): travel along the path, then a look; inf where the
-        candidate is unreachable."""
-        arrival, travel = self._arrival(pose, path_lengths_m)
-        looks = self.time_model.look_times_s(arrival[:, None], 0.0, 0.0, self.settings.azimuth_rad[None],
-                                             self.settings.tilt_rad[None])
-        return travel[:, None] + looks
-
-    def _arrival(self, pose: Pose2D, path_lengths_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per candidate: the heading on arrival (taken as the direction of travel, the head at pan 0)
-        and the travel time along its path (inf: unreachable)."""
+        """t(f) of every (candidate, setting): travel along the path, then a look (heading on
+        arrival taken as the direction of travel); inf where the candidate is unreachable."""
         dx, dy = self.positions[:, 0] - pose.x_m, self.positions[:, 1] - pose.y_m
         arrival = np.arctan2(dy, dx)
         turn = np.where(np.hypot(dx, dy) > 1e-6, np.angle(np.exp(1j * (arrival - pose.heading_rad))), 0.0)
-        return arrival, self.time_model.travel_s(path_lengths_m, turn)
+        travel = self.time_model.travel_s(path_lengths_m, turn)
+        looks = self.time_model.look_times_s(arrival[:, None], 0.0, 0.0, self.settings.azimuth_rad[None],
+                                             self.settings.tilt_rad[None])
+        return travel[:, None] + looks
 
     def _look_here(self, values: ActionValues, look_t: np.ndarray, covering: float, why: str) -> Decision:
         """Eq. 3: the look of largest E(f) = P_Ψ(f) / t(f) from where the robot stands."""

@@ -61,12 +61,10 @@ class TimeModel:
 
     def sweep_s(self, heading_rad, pan_rad: float, tilt_rad: float, azimuths_rad: np.ndarray,
                 tilts_rad: np.ndarray) -> np.ndarray:
-        """The time to take each row's looks (R, k) in one sweep: from the current pan to one end of
-        their pans, then across to the other, stopping at each, whichever end first is quicker; base
-        turns as in :meth:`look`, each from the current heading (an upper bound when several looks
-        lie past a pan limit). ``heading_rad`` is a number or one per row. Timing each look from the
-        current pan, as :meth:`look_times_s` does, would count the slew across the others again for
-        every one."""
+        """The time to take each row's looks (R, k) in one sweep: from the current pan to the nearer
+        end of their pans, then across to the other, stopping at each (base turns as in :meth:`look`);
+        ``heading_rad`` is a number or one per row. Timing each look from the current pan, as
+        :meth:`look_times_s` does, would count the slew across the others again for every one."""
         heading = np.asarray(heading_rad, np.float64).reshape(-1, 1)
         wanted = np.angle(np.exp(1j * (np.asarray(azimuths_rad) - heading)))
         pan = np.clip(wanted, math.radians(self.pantilt.pan_min_deg), math.radians(self.pantilt.pan_max_deg))

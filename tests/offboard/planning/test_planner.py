@@ -307,16 +307,3 @@ def test_staying_is_worth_the_looks_along_one_sweep_not_only_the_best_single_loo
     swept = TIME.sweep_s(0.0, pan, 0.0, s.azimuth_rad[None, [far, *on_the_way]], np.zeros((1, 4)))[0]
     assert stay == pytest.approx(0.06 / swept)
     assert stay > 1.1 * single
-
-
-def test_a_visit_of_one_look_is_worth_it_per_second_of_the_drive_and_that_look():
-    planner = _planner(3, visit_looks=1)
-    pose = Pose2D(0.5, 0.5, 0.3)  # headed between settings: the arrival's first slew is not free
-    paths = _paths(planner, pose)
-    values = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), paths).values
-    far_t = planner._candidate_times(pose, paths)
-    rows = np.arange(len(planner.positions))
-    best = np.argmax(values.detection_prob[:-1], axis=1)
-    found = np.minimum(values.detection_prob[:-1][rows, best], values.covering_prob[:-1])
-    expected = np.where(planner._away(pose), found / far_t[rows, best], 0.0)
-    np.testing.assert_allclose(planner._visit_rates(paths, values, pose), expected, rtol=1e-9)
