@@ -17,13 +17,11 @@ The four cost functions of §5.2.1, selected by ``cost_function``:
 "Explore the current position first" is eq. 3: at the current position, take the look of largest
 E(f) = P_Ψ(f) / t(f). When to stop looking here is the ``move_rule``:
 
-- ``"rate"`` (default): while staying here finds more per second than the best visit elsewhere,
-  travel included — eq. 3 applied over every action, a visit being the best few looks from one
-  position taken in one sweep of the head, and staying the same with no travel (or the best single
-  look here, if that is worth more). It needs no threshold, so it holds whether a look rules a place
-  out at once (the report's target that faces the camera) or only for the facings it saw (a
-  one-sided target).
-  The visit must beat staying here by ``leave_margin``: the best visit overstates what the search
+- ``"rate"`` (default): while the best look here finds more per second than the best visit
+  elsewhere, travel included — eq. 3 applied over every action, a visit being the best few looks
+  from one position. It needs no threshold, so it holds whether a look rules a place out at once
+  (the report's target that faces the camera) or only for the facings it saw (a one-sided target).
+  The visit must beat the look here by ``leave_margin``: the best visit overstates what the search
   finds per second after it (the visits that follow are worse), and leaving forfeits the looks left
   here, which after the move cost a trip back;
 - ``"threshold"``: the report's rule, while the covering probability here is at least Θ_move.
@@ -66,7 +64,7 @@ class PlannerConfig:
     viewpoint_lattice_m: float = field(default=0.25, metadata=bounds(0.05, 2.0))  # they snap to it (cached geometry)
     visit_looks: int = field(default=4, metadata=bounds(1, 64))  # the most looks a visit is credited with
     leave_margin: float = field(default=2.0, metadata=bounds(1.0, 100.0))  # the "rate" rule leaves when a visit
-    # finds this many times more per second than staying here
+    # finds this many times more per second than the best look here
     tilts_deg: tuple[float, ...] = (0.0, 30.0)  # the report's two tilts
     view_overlap: float = field(default=0.4, metadata=bounds(0.0, 0.9))  # between neighbouring settings
     same_position_m: float = field(default=0.5, metadata=bounds(0.0, 5.0))  # "here" for a candidate
@@ -166,8 +164,7 @@ class SearchPlanner:
         if self.config.cost_function == 1:
             decision = self._eq9(values, look_t, far_t, here_covering, pose)
         else:
-            move, why, worth = self._why_move(values, look_t, far_t, path_lengths_m, here_covering, pose,
-                                              pan_rad, tilt_rad)
+            move, why, worth = self._why_move(values, look_t, far_t, path_lengths_m, here_covering, pose)
             decision = (self._move(values, far_t, path_lengths_m, here_covering, pose, why, worth) if move else
                         self._look_here(values, look_t, here_covering, why))
         if elapsed_s + decision.time_s > self.config.budget_s:
@@ -179,7 +176,7 @@ class SearchPlanner:
     # --- the pieces --------------------------------------------------------------------------------
 
     def _why_move(self, values: ActionValues, look_t: np.ndarray, far_t: np.ndarray, path_lengths_m: np.ndarray,
-                  covering: float, pose: Pose2D, pan_rad: float, tilt_rad: float) -> tuple[bool, str, np.ndarray]:
+                  covering: float, pose: Pose2D) -> tuple[bool, str, np.ndarray]:
         """Whether to leave the current position and why (the ``move_rule``), and which candidates
         are worth going to: those the robot would not leave again at once."""
         here = values.detection_prob[-1]
@@ -188,48 +185,32 @@ class SearchPlanner:
             move = covering < self.config.move_threshold
             why = f"covering probability here {covering:.3f} {'<' if move else '≥'} Θ_move {self.config.move_threshold:g}"
         else:
-            here_rate = max(float((here / look_t).max()), self._stay_rate(here, pose, pan_rad, tilt_rad, covering))
+            here_rate = float((here / look_t).max())
             visit = self._visit_rates(values, far_t, path_lengths_m, pose)
             worth = visit > here_rate * self.config.leave_margin
             j = int(np.argmax(visit))
             move = bool(worth[j])
             why = (f"a visit to ({self.positions[j][0]:.2f}, {self.positions[j][1]:.2f}) finds {visit[j]:.4f}/s, "
-                   f"staying here {here_rate:.4f}/s (leaving takes {self.config.leave_margin:g}× that)")
+                   f"the best look here {here_rate:.4f}/s (leaving takes {self.config.leave_margin:g}× that)")
         if not move and here.max() < self.config.min_detection_prob:
             move, why = True, f"no look left here finds it with probability ≥ {self.config.min_detection_prob:g}"
         return move, why, worth
 
-    def _stay_rate(self, here: np.ndarray, pose: Pose2D, pan_rad: float, tilt_rad: float, covering: float) -> float:
-        """The best detection per second of staying on for its best k looks, as a visit counts them
-        (:meth:`_best_looks_rate`, no travel, the sweep from where the head points now): a valuable
-        look a long slew away is worth the slew once the looks on the way are taken too."""
-        return float(self._best_looks_rate(here[None], np.array([pose.heading_rad]), pan_rad, tilt_rad,
-                                           np.zeros(1), np.array([covering]))[0])
-
     def _visit_rates(self, values: ActionValues, far_t: np.ndarray, path_lengths_m: np.ndarray,
                      pose: Pose2D) -> np.ndarray:
         """Per candidate: the best detection per second of a visit — travel there, then its best k
-        looks (heading on arrival as in :meth:`_candidate_times`)."""
+        looks (k ≤ ``visit_looks``), their expected detections summed but capped by the position's
+        covering probability (overlapping views find the same mass once)."""
         reachable = np.isfinite(np.asarray(path_lengths_m, float)) & np.isfinite(far_t).all(axis=1) & self._away(pose)
-        travel = far_t[reachable].min(axis=1) - self.time_model.image_s  # driving there, the first look's slew aside
-        arrival = np.arctan2(self.positions[reachable, 1] - pose.y_m, self.positions[reachable, 0] - pose.x_m)
-        rates = np.zeros(len(self.positions))
-        rates[reachable] = self._best_looks_rate(values.detection_prob[:-1][reachable], arrival, 0.0, 0.0, travel,
-                                                 values.covering_prob[:-1][reachable])
-        return rates
-
-    def _best_looks_rate(self, detection: np.ndarray, heading_rad: np.ndarray, pan_rad: float, tilt_rad: float,
-                         travel_s: np.ndarray, covering: np.ndarray) -> np.ndarray:
-        """Per position (rows): after ``travel_s``, the best detection per second of its best k looks
-        (k ≤ ``visit_looks``, taken in one sweep of the head: :meth:`TimeModel.sweep_s`), their
-        expected detections summed but capped by the position's ``covering`` probability
-        (overlapping views find the same mass once)."""
+        detection, times = values.detection_prob[:-1][reachable], far_t[reachable]
+        travel = times.min(axis=1) - self.time_model.image_s  # driving there, the first look's slew aside
         order = np.argsort(-detection, axis=1)[:, :self.config.visit_looks]
-        found = np.minimum(np.cumsum(np.take_along_axis(detection, order, axis=1), axis=1), covering[:, None])
-        azimuth, tilt = self.settings.azimuth_rad[order], self.settings.tilt_rad[order]
-        spent = np.stack([self.time_model.sweep_s(heading_rad, pan_rad, tilt_rad, azimuth[:, :k], tilt[:, :k])
-                          for k in range(1, order.shape[1] + 1)], axis=1) + travel_s[:, None]
-        return (found / spent).max(axis=1, initial=0.0)
+        found = np.minimum(np.cumsum(np.take_along_axis(detection, order, axis=1), axis=1),
+                           values.covering_prob[:-1][reachable, None])
+        spent = travel[:, None] + np.cumsum(np.take_along_axis(times, order, axis=1) - travel[:, None], axis=1)
+        rates = np.zeros(len(self.positions))
+        rates[reachable] = (found / spent).max(axis=1, initial=0.0)
+        return rates
 
     def _away(self, pose: Pose2D) -> np.ndarray:
         """Candidates that are somewhere else: farther than ``same_position_m`` from the robot."""

@@ -59,27 +59,6 @@ class TimeModel:
         slew = self.pantilt.slew_time_s(np.degrees(pan - pan_rad), np.degrees(np.asarray(tilts_rad) - tilt_rad))
         return self.base.turn_time_s(turn) + slew + self.image_s
 
-    def sweep_s(self, heading_rad, pan_rad: float, tilt_rad: float, azimuths_rad: np.ndarray,
-                tilts_rad: np.ndarray) -> np.ndarray:
-        """The time to take each row's looks (R, k) in one sweep: from the current pan to the nearer
-        end of their pans, then across to the other, stopping at each (base turns as in :meth:`look`);
-        ``heading_rad`` is a number or one per row. Timing each look from the current pan, as
-        :meth:`look_times_s` does, would count the slew across the others again for every one."""
-        heading = np.asarray(heading_rad, np.float64).reshape(-1, 1)
-        wanted = np.angle(np.exp(1j * (np.asarray(azimuths_rad) - heading)))
-        pan = np.clip(wanted, math.radians(self.pantilt.pan_min_deg), math.radians(self.pantilt.pan_max_deg))
-        turns = self.base.turn_time_s(np.angle(np.exp(1j * (wanted - pan)))).sum(axis=1)
-        order = np.argsort(pan, axis=1)
-        pans, tilts = np.take_along_axis(pan, order, axis=1), np.take_along_axis(np.asarray(tilts_rad), order, axis=1)
-        start = np.full((len(pans), 1), pan_rad), np.full((len(pans), 1), tilt_rad)
-        sweeps = []
-        for stops_pan, stops_tilt in ((pans, tilts), (pans[:, ::-1], tilts[:, ::-1])):
-            path_pan = np.hstack([start[0], stops_pan])
-            path_tilt = np.hstack([start[1], stops_tilt])
-            sweeps.append(self.pantilt.slew_time_s(np.degrees(np.diff(path_pan, axis=1)),
-                                                   np.degrees(np.diff(path_tilt, axis=1))).sum(axis=1))
-        return np.minimum(*sweeps) + turns + pans.shape[1] * self.image_s
-
     def travel_s(self, path_length_m, turn_rad):
         """Drive a path of this length after turning towards it; inf for no path (numbers or arrays)."""
         length = np.asarray(path_length_m, np.float64)

@@ -274,36 +274,3 @@ def test_the_geometry_cache_holds_each_candidate_as_computed_afresh_as_candidate
             assert np.array_equal(getattr(cache.geometry, name)[rows], getattr(fresh, name)), name
     with pytest.raises(ValueError, match="do not fit"):
         cache.rows(np.arange(12).reshape(6, 2) * 0.25)
-
-
-def test_a_sweep_of_the_head_starts_at_the_nearer_end_and_stops_at_each_look():
-    looks = np.radians([[10.0, 20.0, 30.0]])
-    flat = np.zeros((1, 3))
-    slew = TIME.pantilt.slew_time_s
-    from_zero = slew(10.0, 0.0) * 3 + 3 * TIME.image_s  # 0 → 10 → 20 → 30
-    assert TIME.sweep_s(0.0, 0.0, 0.0, looks, flat)[0] == pytest.approx(from_zero)
-    from_25 = slew(5.0, 0.0) + 2 * slew(10.0, 0.0) + 3 * TIME.image_s  # 25 → 30 → 20 → 10
-    assert TIME.sweep_s(0.0, math.radians(25.0), 0.0, looks, flat)[0] == pytest.approx(from_25)
-    # one look alone: what look_times_s says
-    assert TIME.sweep_s(0.3, 0.1, 0.0, looks[:, :1], flat[:, :1])[0] == pytest.approx(
-        TIME.look_times_s(0.3, 0.1, 0.0, looks[0, :1], flat[0, :1])[0])
-
-
-def test_staying_is_worth_the_looks_along_one_sweep_not_only_the_best_single_look():
-    """The best look here is a long slew away, and lesser looks lie on the way: the far look alone
-    is worth little per second, but the sweep that takes them all is worth more. Staying is valued
-    at the sweep (the looks taken by value, as a visit's are), so the robot does not leave it."""
-    planner = _planner(3)
-    s = planner.settings
-    flat = np.flatnonzero(s.tilt_rad == 0.0)
-    order = flat[np.argsort(s.azimuth_rad[flat])]  # the level looks, left to right
-    far, on_the_way = order[-1], order[-4:-1]
-    here = np.zeros(len(s))
-    here[far], here[on_the_way] = 0.03, 0.01
-    pose = Pose2D(2.0, 2.0, 0.0)
-    pan = float(s.azimuth_rad[order[-5]])  # the head points at a look taken, next to the lesser ones
-    single = (here / TIME.look_times_s(0.0, pan, 0.0, s.azimuth_rad, s.tilt_rad)).max()
-    stay = planner._stay_rate(here, pose, pan, 0.0, covering=1.0)
-    swept = TIME.sweep_s(0.0, pan, 0.0, s.azimuth_rad[None, [far, *on_the_way]], np.zeros((1, 4)))[0]
-    assert stay == pytest.approx(0.06 / swept)
-    assert stay > 1.1 * single
