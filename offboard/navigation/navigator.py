@@ -24,7 +24,9 @@ Stereo ghosts can close a passage on the map. With no route, the robot first loo
 if a route exists past weakly seen obstacles only, it looks closely along it (a ghost fades when seen
 through) and drives as far as the map allows, never into blocked space. Coming back to where an
 earlier step ended (the map flickering near a narrow gap) also earns a look all round. A run ends
-``reached``, ``unreachable`` (no route even so), ``stalled_out`` or ``budget``; all are bounded.
+``reached``, ``unreachable`` (no route even so), ``stalled_out`` or ``budget``; all are bounded. A caller
+may also see each look toward the motion once it is mapped (``observe``): the search runs its detector
+on it, and a run it asks to stop ends ``interrupted`` where the robot stands.
 Where TangentBug's tangent graph offers no node that gets closer (a gap narrower than its edge
 clearance), the step goes toward the first corner of the global path instead.
 """
@@ -50,11 +52,15 @@ from offboard.robot.robot_client import CommandError, RobotClient
 from offboard.perception.stereo import StereoConfig, StereoMatcher
 from offboard.navigation.tangent_bug import BugConfig, BugStep, TangentBug
 from shared.geometry import Pose2D
+from shared.messages import Capture
 
 log = logging.getLogger(__name__)
 
-Status = Literal["reached", "unreachable", "stalled_out", "budget"]
+Status = Literal["reached", "unreachable", "stalled_out", "budget", "interrupted"]
 T = TypeVar("T")
+# Sees a look toward the motion (the capture, the corrected pose it was taken from, its disparity) once
+# it is mapped; returns a reason to stop the run there, or "" to drive on.
+FrameObserver = Callable[[Capture, Pose2D, np.ndarray], str]
 
 
 @dataclass(frozen=True)
@@ -104,6 +110,7 @@ class NavigationResult:
 class _Frame:
     """A stereo frame captured and localised, waiting to be mapped."""
 
+    capture: Capture
     disparity: np.ndarray
     pan_rad: float
     tilt_rad: float
@@ -119,6 +126,8 @@ class _Run:
     wall_start_s: float  # wall clock at the start, and time spent waiting for the robot before it
     waiting_start_s: float
     squeeze: bool  # planned on the bare radius (Navigator.floor_map)
+    observe: FrameObserver | None = None
+    interrupted: str = ""  # why the observer stopped the run
     distance_m: float = 0.0
     steps: int = 0
     stalls: int = 0
@@ -185,7 +194,7 @@ class Navigator:
         pan = float(np.clip(pan_deg, self._pantilt.pan_min_deg, self._pantilt.pan_max_deg))
         self._command(self.robot.look, pan, tilt)
         capture = self._command(self.robot.capture)
-        frame = _Frame(self._stereo.disparity(capture.left, capture.right), math.radians(capture.pan_deg),
+        frame = _Frame(capture, self._stereo.disparity(capture.left, capture.right), math.radians(capture.pan_deg),
                        math.radians(capture.tilt_deg), capture.robot_time_s)
         self._odom = capture.pose.to_pose()
         self.tracker.predict(self._odom)
@@ -216,14 +225,15 @@ class Navigator:
 
     # --- driving -----------------------------------------------------------------------------------
 
-    def go_to(self, goal: Point, squeeze: bool = False) -> NavigationResult:
+    def go_to(self, goal: Point, squeeze: bool = False, observe: FrameObserver | None = None) -> NavigationResult:
         """Drive to ``goal`` (world frame, metres); never raises for an unreachable goal. ``squeeze``:
-        plan the whole run on the bare radius (:meth:`floor_map`)."""
+        plan the whole run on the bare radius (:meth:`floor_map`). ``observe`` sees every look toward
+        the motion and may stop the run (``interrupted``)."""
         state = self.robot.state()  # the robot may have been turned or moved since the last call
         self._odom = state.pose.to_pose()
         self.tracker.predict(self._odom)
         run = _Run(goal, state.robot_time_s, state.robot_time_s, (self.matches_accepted, self.matches_tried),
-                   time.perf_counter(), self.waiting_s, squeeze)
+                   time.perf_counter(), self.waiting_s, squeeze, observe)
         bug = TangentBug(goal, self.config.bug)
         while True:
             verdict = self._verdict(run)
@@ -232,6 +242,8 @@ class Navigator:
             if verdict is not None:
                 return self._result(run, *verdict)
             waypoint, why = self._next_waypoint(run, bug)
+            if run.interrupted:
+                return self._result(run, "interrupted", run.interrupted)
             if waypoint is None and why.startswith("no route") and (self._survey_once(run) or self._probe(run)):
                 continue  # ghosts fade and gaps show: look again before giving up
             if waypoint is None:
@@ -299,6 +311,8 @@ class Navigator:
             run.pans_here.append(pan)
             self._relocalize(run)  # the look ahead, into unmapped space, may have had nothing to match
             self._map(frame)  # so it is mapped with the pose the look for the map corrected
+            if run.observe is not None:
+                run.interrupted = run.observe(frame.capture, self.pose, frame.disparity)
             planned = self._plan(run, bug)
         return planned
 

@@ -41,15 +41,17 @@ class Perception:
         self.matcher = matcher
 
     def observe(self, capture: Capture, pose: Pose2D, detector: Detector | None = None,
-                update_map: bool = True) -> Observation:
-        """Stereo, then the occupancy update (eq. 5-8), then the detector if one is given."""
+                update_map: bool = True, disparity: np.ndarray | None = None) -> Observation:
+        """Stereo (unless the capture's ``disparity`` is given), then the occupancy update (eq. 5-8),
+        then the detector if one is given."""
         timings: dict[str, float] = {}
         intrinsics = capture.intrinsics.to_intrinsics()
         mount = capture.mount.to_mount()
         camera = mount.camera_in_world(pose, math.radians(capture.pan_deg), math.radians(capture.tilt_deg))
-        started = time.perf_counter()
-        disparity = self.matcher.disparity(capture.left, capture.right)
-        timings["stereo_ms"] = _since(started)
+        if disparity is None:
+            started = time.perf_counter()
+            disparity = self.matcher.disparity(capture.left, capture.right)
+            timings["stereo_ms"] = _since(started)
         if update_map:
             started = time.perf_counter()
             self.occupancy.integrate_disparity(disparity, intrinsics, mount.baseline_m, camera)

@@ -10,6 +10,10 @@ Time is honest: every action's motion (robot clock: driving, slewing, capture) a
 and reported apart; the planner's t(f) includes the mean processing measured so far.
 The environment is unknown: the planner never reads a world file, only the room's boundary
 (report §3.1: "we assume that boundaries of Ω are known exactly").
+
+Between positions, every frame the navigator takes toward the motion is searched too (a *glance*: the
+detector and Bayes, as for a look, but not chosen by the planner and not counted as an action); a
+detection on the way stops the move.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ from offboard.planning.time_model import TimeModel
 from offboard.search.top_view import LookTrace, draw_top_view
 from offboard.perception.voxel_grid import VoxelGrid
 from shared.geometry import Pose2D
+from shared.messages import Capture
 from shared.strict import bounds
 
 log = logging.getLogger(__name__)
@@ -110,6 +115,7 @@ class SearchState:
     processing_s: float = 0.0  # wall clock: capture transfer, stereo, detection, mapping, update, planning
     driving_s: float = 0.0  # moves between positions: robot clock, and processing unless planned_processing_s is set
     look_log: list[dict] = field(default_factory=list)  # per look: expected and realised P, times
+    glances: int = 0  # frames the navigator took toward the motion, searched on the way (not looks)
 
     def took(self, setting: int, located: bool) -> None:
         """Book a look at ``setting`` from where the robot stands: it is not taken again from here,
@@ -256,7 +262,7 @@ class Search:
     def _move(self, decision: Decision) -> None:
         goal = decision.position_m
         before = self.robot_time_s()
-        result = self.navigator.go_to(goal, squeeze=goal == self._squeeze_to)
+        result = self.navigator.go_to(goal, squeeze=goal == self._squeeze_to, observe=self._glance)
         self._squeeze_to = None
         motion_s = self.robot_time_s() - before
         self.state.motion_s += motion_s
@@ -269,6 +275,8 @@ class Search:
         if result.status == "reached":
             self.state.positions.append((result.pose.x_m, result.pose.y_m))
             self._look(decision)  # the look the move was chosen for
+        elif result.status == "interrupted":  # a glance saw the target: decide again from here
+            self.state.positions.append((result.pose.x_m, result.pose.y_m))
         else:
             self.state.unreachable.append(tuple(goal))
             log.warning("position (%.1f, %.1f) not reached: %s (%s)", goal[0], goal[1], result.status, result.reason)
@@ -301,11 +309,21 @@ class Search:
         self._account(decision, obs, realised, motion_s, processing_s)
         self.state.looks.append(LookTrace(obs.pose.x_m, obs.pose.y_m, decision.azimuth_rad,
                                           math.degrees(decision.tilt_rad), table.range_m[1], found))
-        for prior in self.dynamic_priors:
-            factor = prior(obs, self)
-            if factor is not None:
-                self.belief.reweight(factor)
         self._record(obs, table)
+
+    def _glance(self, capture: Capture, pose: Pose2D, disparity: np.ndarray) -> str:
+        """Search a frame the navigator took toward the motion, as a look is searched: the detector,
+        then Bayes. The frame is there anyway (the navigator maps with it), and a target on the way is
+        seen before the robot drives past it. A detection stops the move, so the search decides again
+        from there: a look to confirm it, or the target is found already."""
+        detector, table = self._planning_detector()
+        obs = self.perception.observe(capture, pose, detector, update_map=False, disparity=disparity)
+        _, found = self._interpret(obs, table, "glance after look")
+        self.state.glances += 1
+        self._record(obs, table)
+        if obs.detection is None:
+            return ""
+        return "the target found on the way" if found else "a detection on the way"
 
     def _account(self, decision: Decision, obs: Observation, realised: float, motion_s: float,
                  processing_s: float) -> None:
@@ -323,10 +341,11 @@ class Search:
         if not self.config.planned_processing_s:
             self.planner.set_processing_s(float(np.mean([look["processing_s"] for look in s.look_log])))
 
-    def _interpret(self, obs: Observation, table: DetectabilityTable) -> tuple[float, bool]:
-        """Bayes on what the look saw: eq. 4 after a miss, the detection model after a detection.
-        Returns the look's realised detection probability (eq. 1 over what it actually saw, before the
-        update) and whether the target now counts as found."""
+    def _interpret(self, obs: Observation, table: DetectabilityTable, what: str = "look") -> tuple[float, bool]:
+        """Bayes on what the look (or glance) saw: eq. 4 after a miss, the detection model after a
+        detection; then the dynamic priors' factors for what it showed. Returns the realised detection
+        probability (eq. 1 over what it actually saw, before the update) and whether the target now
+        counts as found."""
         near, far = table.range_m
         depth = visible_depth(obs.disparity, self.occupancy, obs.camera_in_world, obs.intrinsics,
                               obs.baseline_m, 16, far)
@@ -335,14 +354,18 @@ class Search:
         self.last_footprint = footprint
         if obs.detection is None:
             realised = self.belief.update_after_miss(footprint.cube_index, footprint.detection_prob)
-            log.info("look %d: no target; it could have found it with probability %.3f; P[F] = %.3f",
-                     self.state.actions, realised, self.belief.success_prob)
+            log.info("%s %d: no target; it could have found it with probability %.3f; P[F] = %.3f",
+                     what, self.state.actions, realised, self.belief.success_prob)
             found = False
         else:
             realised = self.belief.expected_detection(footprint.cube_index, footprint.detection_prob)
             found = self._detected(obs, table, footprint)
         if self.config.empty_factor < 1.0:  # what stereo saw through holds no target
             self.belief.rule_out_empty(seen_empty(self.occupancy, self.config), self.config.empty_factor)
+        for prior in self.dynamic_priors:
+            factor = prior(obs, self)
+            if factor is not None:
+                self.belief.reweight(factor)
         return realised, found
 
     def _detected(self, obs: Observation, table: DetectabilityTable, footprint) -> bool:
@@ -403,10 +426,14 @@ class Search:
                 best, best_value = name, value
         return best, self.detectors[best]
 
-    def _planning_table(self) -> DetectabilityTable:
+    def _planning_detector(self) -> tuple[Detector, DetectabilityTable]:
+        """The configured detector; under ``auto``, the one of longest range, which the planner plans with."""
         if self.config.detector != "auto":
-            return self.detectors[self.config.detector][1]
-        return max((t for _, t in self.detectors.values()), key=lambda t: t.range_m[1])
+            return self.detectors[self.config.detector]
+        return max(self.detectors.values(), key=lambda pair: pair[1].range_m[1])
+
+    def _planning_table(self) -> DetectabilityTable:
+        return self._planning_detector()[1]
 
     def _record(self, obs: Observation, table: DetectabilityTable) -> None:
         if not self.recorder:
@@ -446,6 +473,7 @@ class Search:
             "cost_function": self.config.planner.cost_function,
             "detector": self.config.detector,
             "decisions": len(s.planning_ms),
+            "glances": s.glances,
         }
 
     def write_top_view(self, path: Path) -> None:

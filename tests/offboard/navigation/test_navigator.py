@@ -88,6 +88,28 @@ def test_reaches_a_goal_behind_the_u_without_touching_anything(agent, world_path
     assert nominal_s <= result.robot_time_s < 3 * nominal_s, (nominal_s, result.robot_time_s)
 
 
+def test_an_observer_sees_each_look_toward_the_motion_and_can_stop_the_run_there(agent):
+    _, robot = agent
+    seen = []
+
+    def observe(capture, pose, disparity):
+        seen.append((capture, pose, disparity))
+        return "seen enough" if len(seen) == 2 else ""
+
+    retry_busy(robot.sim_teleport, 1.5, 2.0, 0.0)
+    navigator = Navigator(robot, OccupancyGrid(VoxelGrid((8.0, 6.0, 2.5), 0.05)))
+    navigator.survey()
+    result = navigator.go_to((5.5, 2.0), observe=observe)
+    assert result.status == "interrupted" and result.reason == "seen enough"
+    assert len(seen) == 2 and result.steps == 1  # one step, then the second look, and no step after it
+    capture, pose, disparity = seen[1]
+    truth = robot.sim_truth()
+    assert math.dist((truth.x_m, truth.y_m), (pose.x_m, pose.y_m)) < 0.1  # the pose it was taken from
+    assert capture.tilt_deg == pytest.approx(NavigatorConfig().look_tilt_deg, abs=0.5)  # toward the motion
+    assert disparity.shape == capture.left.shape[:2] and np.isfinite(disparity).sum() > 1000
+    assert math.dist((truth.x_m, truth.y_m), (1.5, 2.0)) > 0.3
+
+
 def test_a_goal_inside_an_obstacle_is_unreachable_in_bounded_time(agent):
     _, robot = agent
     result = navigate(robot, (1.5, 2.0, 90.0), (1.4, 4.2))

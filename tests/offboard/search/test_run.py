@@ -53,14 +53,14 @@ def _assert_found_near_truth(summary: dict, world_path: str | Path) -> None:
     assert error < 0.3, f"estimate {summary['target_estimate_m']} is {error:.2f} m from the target"
 
 
-def _recorded_actions(rrd: Path) -> int:
-    """How many images the recording holds on the ``action`` timeline."""
+def _recorded_images(rrd: Path) -> Counter:
+    """How many camera images the recording holds at each tick of the ``action`` timeline."""
     ticks = Counter()
     for chunk in RrdReader(rrd).stream():
         if chunk.entity_path == "/world/robot/head/camera/image":
             batch = chunk.to_record_batch()
             ticks.update(batch.column("action").to_pylist())
-    return len(ticks)
+    return ticks
 
 
 @pytest.mark.parametrize("world,start", WORLDS, ids=[w for w, _ in WORLDS])
@@ -68,7 +68,9 @@ def test_the_search_finds_the_target_in_every_bundled_world(tmp_path, world, sta
     summary, out = _search(tmp_path, world, *([] if start is None else ["--start", start]))
     _assert_found_near_truth(summary, world)
     assert (out / "search.png").stat().st_size > 10_000 and (out / "search.log").stat().st_size > 0
-    assert _recorded_actions(out / "search.rrd") == summary["actions"]
+    images = _recorded_images(out / "search.rrd")  # every look, and every glance on the way (at the look before it)
+    assert sum(images.values()) == summary["actions"] + summary["glances"]
+    assert set(images) - {0} == set(range(1, summary["actions"] + 1))
     assert summary["planning_ms_p50"] <= summary["planning_ms_p95"]
     assert summary["robot_time_s"] > 0 and summary["distance_m"] >= 0
 
@@ -121,3 +123,4 @@ def test_a_robot_its_map_boxes_in_squeezes_through_and_finds_the_target(tmp_path
                            extra=("--config", str(config)))
     assert "squeezing through on its bare radius" in (out / "search.log").read_text()
     assert summary["found"] and summary["distance_m"] > 2.0, summary
+    assert summary["glances"] >= summary["distance_m"] / 0.6 - 1  # every step's look toward the motion is searched
