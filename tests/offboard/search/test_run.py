@@ -113,6 +113,20 @@ def test_a_world_it_has_never_seen_works_without_changes(tmp_path):
     _assert_found_near_truth(summary, world)
 
 
+def test_a_target_seen_on_the_way_stops_the_move(tmp_path):
+    # a dev room (the tuning suite): after looking round from this start, the robot drives across the
+    # room, and a frame toward the motion shows the target's picture on a shelf ahead
+    world = Path(__file__).parents[3] / "shared" / "worlds" / "dev" / "room-1000-0.toml"
+    config = tmp_path / "fixed.toml"
+    config.write_text("planned_processing_s = 0.45\n")  # the run repeats exactly, however loaded the machine
+    summary, out = _search(tmp_path, str(world), "--start", "3.43,4.67,195", "--seed", "3",
+                           extra=("--config", str(config)))
+    log = (out / "search.log").read_text()
+    assert "interrupted (a detection on the way)" in log or "interrupted (the target found on the way)" in log
+    _assert_found_near_truth(summary, world)
+    assert summary["glances"] > 0
+
+
 def test_a_robot_its_map_boxes_in_squeezes_through_and_finds_the_target(tmp_path):
     # the start's pocket has two ways out that the navigator's margin shuts on the map; before the
     # search chose again on the bare radius it stopped here as exhausted, 2 of 57 positions reachable
