@@ -89,6 +89,7 @@ class _Tour:
     def __init__(self, planner: SearchPlanner, config: BaselineConfig):
         self.planner, self.config = planner, config
         self.visited = np.zeros(len(planner.positions), bool)
+        self.goal: int | None = None  # the position of the last move
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
@@ -119,13 +120,16 @@ class _Tour:
                         float(settings.azimuth_rad[s]), float(settings.tilt_rad[s]), time_s=float(times[k]), setting=s)
 
     def _next_position(self, pose: Pose2D, occupancy: OccupancyGrid, paths: np.ndarray) -> Decision:
+        """The next position to look around from. A position is visited on arrival (:meth:`_look_around`),
+        so a move that a detection on the way stopped short goes on to its goal, if it is still reachable."""
+        if self.goal is not None and not self.visited[self.goal] and np.isfinite(paths[self.goal]):
+            return self._move_to(pose, self.goal, paths[self.goal], "on to")
         available = np.isfinite(paths) & ~self.visited
         if not available.any():
             return Decision("stop", f"{self.name}: every reachable position has been looked around",
                             status="exhausted")
-        j, why = self._choose(pose, occupancy, paths, available)
-        self.visited[j] = True
-        return self._move_to(pose, j, paths[j], why)
+        self.goal, why = self._choose(pose, occupancy, paths, available)
+        return self._move_to(pose, self.goal, paths[self.goal], why)
 
     def _choose(self, pose: Pose2D, occupancy: OccupancyGrid, paths: np.ndarray,
                 available: np.ndarray) -> tuple[int, str]:

@@ -313,7 +313,8 @@ class Navigator:
             self._map(frame)  # so it is mapped with the pose the look for the map corrected
             if run.observe is not None:
                 run.interrupted = run.observe(frame.capture, self.pose, frame.disparity)
-            planned = self._plan(run, bug)
+            if not run.interrupted:
+                planned = self._plan(run, bug)
         return planned
 
     def _relocalize(self, run: _Run) -> bool:

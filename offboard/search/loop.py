@@ -47,7 +47,7 @@ from offboard.perception.stereo import StereoConfig, StereoMatcher
 from offboard.planning.time_model import TimeModel
 from offboard.search.top_view import LookTrace, draw_top_view
 from offboard.perception.voxel_grid import VoxelGrid
-from shared.geometry import Pose2D
+from shared.geometry import Pose2D, RigidTransform
 from shared.messages import Capture
 from shared.strict import bounds
 
@@ -170,6 +170,8 @@ class Search:
         self._pan_tilt = (math.radians(start.pan_deg), math.radians(start.tilt_deg))
         self._plans_positions = policy is None  # baselines keep the report's fixed grid
         self._pending_processing_s = 0.0  # planning done towards the coming look
+        self._glanced: list[RigidTransform] = []  # the camera poses of the glances so far
+        self._glance_recording_s = 0.0  # wall time logging glances during the current move
         self._squeeze_to: tuple[float, float] | None = None  # a move chosen on the bare radius (_choose)
         self.on_action: Callable[[Search], None] | None = None  # after every action (the checkpoint)
 
@@ -215,7 +217,7 @@ class Search:
         """Compile the planner's and the look's kernels (or load them from numba's cache) before the
         search starts, so that the first decision costs what every other one does."""
         started = time.perf_counter()
-        self._choose(self._pose())
+        self._choose_on(self._pose(), squeeze=False, policy=self.planner)  # a baseline's state is left alone
         camera = self.mount.camera_in_world(self._pose(), *self._pan_tilt)
         table = self._planning_table()
         depth = visible_depth(None, self.occupancy, camera, self.intrinsics, self.mount.baseline_m, 16, table.range_m[1])
@@ -235,7 +237,7 @@ class Search:
                 self._squeeze_to = decision.position_m
         return decision
 
-    def _choose_on(self, pose: Pose2D, squeeze: bool) -> Decision:
+    def _choose_on(self, pose: Pose2D, squeeze: bool, policy: Policy | None = None) -> Decision:
         floor = self.navigator.floor_map(squeeze)  # the navigator's clearance: a path here is one it drives
         if self._plans_positions:
             self.planner.plan_positions(pose, floor, self.info.base.radius_m + 0.05)
@@ -243,8 +245,8 @@ class Search:
         paths = grid_planner.distances_at(floor, field_m, self.planner.positions)
         for goal in self.state.unreachable:
             paths[np.hypot(*(self.planner.positions - goal).T) < self.config.planner.same_position_m] = np.inf
-        return self.policy.decide(pose, *self._pan_tilt, self.elapsed_s(), self.occupancy, paths,
-                                  frozenset(self.state.taken))
+        return (policy or self.policy).decide(pose, *self._pan_tilt, self.elapsed_s(), self.occupancy, paths,
+                                              frozenset(self.state.taken))
 
     def _decide(self) -> Decision:
         pose = self._pose()
@@ -265,9 +267,10 @@ class Search:
         result = self.navigator.go_to(goal, squeeze=goal == self._squeeze_to, observe=self._glance)
         self._squeeze_to = None
         motion_s = self.robot_time_s() - before
+        processing_s, self._glance_recording_s = result.processing_s - self._glance_recording_s, 0.0
         self.state.motion_s += motion_s
-        self.state.processing_s += result.processing_s
-        self.state.driving_s += motion_s + (0.0 if self.config.planned_processing_s else result.processing_s)
+        self.state.processing_s += processing_s
+        self.state.driving_s += motion_s + (0.0 if self.config.planned_processing_s else processing_s)
         self.state.moved()
         self.state.distance_m += result.distance_m
         self.measure_driving()
@@ -277,6 +280,9 @@ class Search:
             self._look(decision)  # the look the move was chosen for
         elif result.status == "interrupted":  # a glance saw the target: decide again from here
             self.state.positions.append((result.pose.x_m, result.pose.y_m))
+            if self.state.found:  # no look follows to book the move's planning time
+                self.state.processing_s += self._pending_processing_s
+                self._pending_processing_s = 0.0
         else:
             self.state.unreachable.append(tuple(goal))
             log.warning("position (%.1f, %.1f) not reached: %s (%s)", goal[0], goal[1], result.status, result.reason)
@@ -309,18 +315,30 @@ class Search:
         self._account(decision, obs, realised, motion_s, processing_s)
         self.state.looks.append(LookTrace(obs.pose.x_m, obs.pose.y_m, decision.azimuth_rad,
                                           math.degrees(decision.tilt_rad), table.range_m[1], found))
+        for prior in self.dynamic_priors:  # looks only: a glance repeats much of the last one's view, and
+            factor = prior(obs, self)  # saliency multiplies in whatever each image shows
+            if factor is not None:
+                self.belief.reweight(factor)
         self._record(obs, table)
 
     def _glance(self, capture: Capture, pose: Pose2D, disparity: np.ndarray) -> str:
         """Search a frame the navigator took toward the motion, as a look is searched: the detector,
         then Bayes. The frame is there anyway (the navigator maps with it), and a target on the way is
         seen before the robot drives past it. A detection stops the move, so the search decides again
-        from there: a look to confirm it, or the target is found already."""
+        from there: a look to confirm it, or the target is found already. A view already glanced at
+        (a move begun again from where the last one stopped) is skipped: the same image says nothing
+        new, and counted twice it would make a weak false detection look confirmed."""
+        camera = self.mount.camera_in_world(pose, math.radians(capture.pan_deg), math.radians(capture.tilt_deg))
+        if any(same_view(camera, view) for view in self._glanced):
+            return ""
+        self._glanced.append(camera)
         detector, table = self._planning_detector()
         obs = self.perception.observe(capture, pose, detector, update_map=False, disparity=disparity)
         _, found = self._interpret(obs, table, "glance after look")
         self.state.glances += 1
-        self._record(obs, table)
+        started = time.perf_counter()
+        self._record(obs, table, look=False)
+        self._glance_recording_s += time.perf_counter() - started  # logging is not the search's processing
         if obs.detection is None:
             return ""
         return "the target found on the way" if found else "a detection on the way"
@@ -343,9 +361,8 @@ class Search:
 
     def _interpret(self, obs: Observation, table: DetectabilityTable, what: str = "look") -> tuple[float, bool]:
         """Bayes on what the look (or glance) saw: eq. 4 after a miss, the detection model after a
-        detection; then the dynamic priors' factors for what it showed. Returns the realised detection
-        probability (eq. 1 over what it actually saw, before the update) and whether the target now
-        counts as found."""
+        detection. Returns the realised detection probability (eq. 1 over what it actually saw, before
+        the update) and whether the target now counts as found."""
         near, far = table.range_m
         depth = visible_depth(obs.disparity, self.occupancy, obs.camera_in_world, obs.intrinsics,
                               obs.baseline_m, 16, far)
@@ -362,10 +379,6 @@ class Search:
             found = self._detected(obs, table, footprint)
         if self.config.empty_factor < 1.0:  # what stereo saw through holds no target
             self.belief.rule_out_empty(seen_empty(self.occupancy, self.config), self.config.empty_factor)
-        for prior in self.dynamic_priors:
-            factor = prior(obs, self)
-            if factor is not None:
-                self.belief.reweight(factor)
         return realised, found
 
     def _detected(self, obs: Observation, table: DetectabilityTable, footprint) -> bool:
@@ -435,11 +448,13 @@ class Search:
     def _planning_table(self) -> DetectabilityTable:
         return self._planning_detector()[1]
 
-    def _record(self, obs: Observation, table: DetectabilityTable) -> None:
+    def _record(self, obs: Observation, table: DetectabilityTable, look: bool = True) -> None:
+        """Log what an image showed and the maps after it: a look on the ``action`` timeline, a glance
+        on the robot's clock only (on the ``action`` timeline it would hide the look before it)."""
         if not self.recorder:
             return
         r = self.recorder
-        r.set_time(self.state.actions, self.robot_time_s())
+        r.set_time(self.state.actions if look else None, self.robot_time_s())
         r.log_pose(obs.pose, math.radians(obs.capture.pan_deg), math.radians(obs.capture.tilt_deg), self.mount)
         r.log_observation(obs, table.range_m[1])
         r.log_maps(self.belief, self.occupancy)
@@ -482,6 +497,13 @@ class Search:
         title = (f"{s.status}: {s.actions} looks, {len(s.positions)} positions, {s.distance_m:.1f} m, "
                  f"{self.robot_time_s() / 60:.1f} min robot time")
         draw_top_view(path, self.config.room_m, floor, s.trail, s.looks, self.intrinsics.hfov_rad, s.estimate_m, title)
+
+
+def same_view(a: RigidTransform, b: RigidTransform, within_m: float = 0.05, within_deg: float = 3.0) -> bool:
+    """Two camera poses close enough that their images show the same thing."""
+    axes = a.rotation[:, 2] @ b.rotation[:, 2]  # the optical axes (camera z)
+    return bool(np.linalg.norm(a.translation - b.translation) <= within_m
+                and axes >= math.cos(math.radians(within_deg)))
 
 
 def seen_empty(occupancy: OccupancyGrid, config: SearchConfig) -> np.ndarray:

@@ -102,8 +102,13 @@ class Recorder:
 
     # --- per action ----------------------------------------------------------------------------------
 
-    def set_time(self, action: int, robot_time_s: float) -> None:
-        self.stream.set_time("action", sequence=action)
+    def set_time(self, action: int | None, robot_time_s: float) -> None:
+        """What follows is logged at this look (``action``) and robot time; with no ``action``, on the
+        robot's clock only (a glance between looks)."""
+        if action is None:
+            self.stream.disable_timeline("action")
+        else:
+            self.stream.set_time("action", sequence=action)
         self.stream.set_time("robot_time", duration=robot_time_s)
 
     def log_pose(self, pose: Pose2D, pan_rad: float, tilt_rad: float, mount: HeadMount) -> None:

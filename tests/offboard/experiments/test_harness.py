@@ -226,14 +226,18 @@ def test_tours_look_around_then_move_then_stop(name):
     assert math.isclose(first.azimuth_rad, planner.settings.azimuth_rad[first.setting])
     second = _decide(policy, planner, pose, {first.setting})
     assert second.kind == "look" and second.setting != first.setting
+    stopped_short = _decide(policy, planner, pose, everything)  # a detection on the way stops the move here...
+    assert stopped_short.kind == "move"
     moves = []
     for _ in range(len(planner.positions) + 1):
-        d = _decide(policy, planner, pose, everything)
+        d = _decide(policy, planner, pose, everything)  # ... and the tour goes on to the same position
         if d.kind != "move":
             break
         assert any(np.allclose(d.position_m, p) for p in planner.positions) and 0 <= d.setting < len(planner.settings)
         moves.append(d.position_m)
+        pose = Pose2D(*d.position_m, 0.0)  # arrived; every setting is taken there at once
     assert d.kind == "stop" and d.status == "exhausted"
+    assert moves[0] == stopped_short.position_m
     assert len(set(moves)) == len(moves) == len(planner.positions) - 1  # every other candidate once
     late = BASELINES[name](BaselineContext(seed=1))(planner)
     assert _decide(late, planner, pose, elapsed_s=planner.config.budget_s).status == "budget"

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from offboard.search.loop import SearchState
+import math
+
+from offboard.search.loop import SearchState, same_view
+from shared.geometry import HeadMount, Pose2D
 
 
 def test_a_setting_is_taken_once_from_a_position():
@@ -11,7 +14,7 @@ def test_a_setting_is_taken_once_from_a_position():
     assert state.taken == {3}
 
 
-def test_a_located_detection_is_confirmed_from_the_same_view_once_and_only_once():
+def test_a_located_detection_is_confirmed_from_thesame_view_once_and_only_once():
     state = SearchState()
     state.took(5, located=True)
     assert 5 not in state.taken  # free to look again: a second image confirms it
@@ -28,3 +31,12 @@ def test_moving_makes_every_setting_new_again():
     assert not state.taken
     state.took(5, located=True)
     assert 5 not in state.taken
+
+
+def test_a_glance_repeats_a_view_only_from_the_same_camera_pose_and_direction():
+    mount = HeadMount()
+    here = mount.camera_in_world(Pose2D(2.0, 3.0, 0.5), 0.0, math.radians(-25.0))
+    assert same_view(here, mount.camera_in_world(Pose2D(2.01, 3.0, 0.5), 0.0, math.radians(-25.0)))
+    assert not same_view(here, mount.camera_in_world(Pose2D(2.0, 3.0, 0.5), math.radians(5.0), math.radians(-25.0)))
+    assert not same_view(here, mount.camera_in_world(Pose2D(2.0, 3.0, 0.5), 0.0, math.radians(-20.0)))
+    assert not same_view(here, mount.camera_in_world(Pose2D(2.1, 3.0, 0.5), 0.0, math.radians(-25.0)))
