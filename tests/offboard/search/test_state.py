@@ -14,7 +14,7 @@ def test_a_setting_is_taken_once_from_a_position():
     assert state.taken == {3}
 
 
-def test_a_located_detection_is_confirmed_from_thesame_view_once_and_only_once():
+def test_a_located_detection_is_confirmed_from_the_same_view_once_and_only_once():
     state = SearchState()
     state.took(5, located=True)
     assert 5 not in state.taken  # free to look again: a second image confirms it
