@@ -58,7 +58,9 @@ DERIVED_COLUMNS = ("estimate_error_m", "shortest_path_m", "success", "spl", "run
 # added later, at the end: summary.json's motion (robot clock) and processing (wall) seconds, empty when the
 # search did not measure them; the run's folder under the sweep's --out (its looks.jsonl)
 TIME_COLUMNS = ("motion_time_s", "processing_time_s", "run_dir")
-COLUMNS = RUN_COLUMNS + SUMMARY_COLUMNS + DERIVED_COLUMNS + TIME_COLUMNS
+# later still: summary.json's frames searched on the way between positions (not looks); empty before then
+GLANCE_COLUMNS = ("glances",)
+COLUMNS = RUN_COLUMNS + SUMMARY_COLUMNS + DERIVED_COLUMNS + TIME_COLUMNS + GLANCE_COLUMNS
 TEXT_COLUMNS = ("method", "world", "start", "target", "prior", "status", "key", "error", "detector", "prior_spec",
                 "target_estimate_m", "run_dir")
 
@@ -224,6 +226,7 @@ class MethodStats:
     latency_p95_ms: float | None  # 95th percentile over runs of each run's p95
     motion_min: float | None = None
     processing_min: float | None = None  # None: no run measured it
+    glances: float | None = None  # over successful runs; None: some run did not count them
     scope: str = ""  # the worlds and seeds the figures come from
 
     @property
@@ -263,12 +266,13 @@ def _stats(name: str, rows: list[dict]) -> MethodStats:
     return MethodStats(name, len(rows), len(ok), _mean([r["spl"] or 0.0 for r in rows]),
                        *(_mean([r[m] for r in ok]) for m in ("time_min", "actions", "distance_m")),
                        statistics.median(p50) if p50 else None, float(np.percentile(p95, 95)) if p95 else None,
-                       _mean([r["motion_min"] for r in ok]), _all_measured(ok, "processing_min"), scope(rows))
+                       _mean([r["motion_min"] for r in ok]), _all_measured(ok, "processing_min"),
+                       _all_measured(ok, "glances"), scope(rows))
 
 
 def _all_measured(rows: list[dict], column: str) -> float | None:
     """The mean of ``column`` if every run measured it (a partial mean would not compare), else None."""
-    values = [r[column] for r in rows]
+    values = [r.get(column) for r in rows]  # a results.csv from before the column has none
     return None if None in values else _mean(values)
 
 
@@ -433,14 +437,16 @@ def _table_md(prior: str, ours: Tables, rows: list[dict]) -> list[str]:
 
 
 def _stats_md(stats: list[MethodStats], first: str = "Method", latency: bool = True, scoped: bool = True) -> list[str]:
-    """One row per :class:`MethodStats`: success, SPL, looks, distance, motion, processing and their sum."""
-    heads = [first, "Runs", "Success", "SPL", "Looks", "Distance (m)", "Motion (min)", "Processing (min)",
+    """One row per :class:`MethodStats`: success, SPL, looks and glances, distance, motion, processing and
+    their sum."""
+    heads = [first, "Runs", "Success", "SPL", "Looks", "Glances", "Distance (m)", "Motion (min)", "Processing (min)",
              "Motion + processing (min)"] + ["Planning p50 / p95 (ms)"] * latency + ["Worlds; seeds"] * scoped
     lines = ["| " + " | ".join(heads) + " |", "|---" * len(heads) + "|"]
     for s in stats:
         rate = "—" if s.success_rate is None else f"{100 * s.success_rate:.1f}%"
-        cells = [s.name, str(s.runs), rate, cell(s.spl, 3), cell(s.actions, 1), cell(s.distance_m),
-                 cell(s.motion_min), cell(s.processing_min), cell(s.time_min if s.processing_min is not None else None)]
+        total = s.time_min if s.processing_min is not None else None
+        cells = [s.name, str(s.runs), rate, cell(s.spl, 3), cell(s.actions, 1), cell(s.glances, 1),
+                 cell(s.distance_m), cell(s.motion_min), cell(s.processing_min), cell(total)]
         cells += [f"{cell(s.latency_p50_ms, 0)} / {cell(s.latency_p95_ms, 0)}"] * latency + [s.scope] * scoped
         lines.append("| " + " | ".join(cells) + " |")
     return lines + [""]

@@ -44,16 +44,17 @@ def _row(results: Path, method: str, world: str, prior: str, seed: int, motion_s
     return row
 
 
-def test_rows_carry_motion_and_processing_time_and_keep_the_old_columns_first(tmp_path):
+def test_rows_carry_motion_and_processing_time_and_glances_and_keep_the_old_columns_first(tmp_path):
     results = tmp_path / "results.csv"
-    row = _row(results, "syt", "office", "uniform", 0, 120.0, 60.0)
+    row = _row(results, "syt", "office", "uniform", 0, 120.0, 60.0, glances=7)
     assert row["motion_time_s"] == 120.0 and row["processing_time_s"] == 60.0 and row["run_dir"].startswith("runs/")
     assert COLUMNS[:7] == ("method", "world", "start", "target", "cost", "prior", "seed")
-    assert COLUMNS[-3:] == ("motion_time_s", "processing_time_s", "run_dir") and COLUMNS[-4] == "key"
+    assert COLUMNS[-4:] == ("motion_time_s", "processing_time_s", "run_dir", "glances") and COLUMNS[-5] == "key"
     _row(results, "syt", "office", "uniform", 1, None, None)  # a search that did not measure them
     loaded = {r["seed"]: r for r in load_results(results)}
     assert loaded[0]["time_min"] == pytest.approx(3.0) and loaded[0]["processing_min"] == pytest.approx(1.0)
     assert loaded[1]["processing_min"] is None and loaded[1]["time_min"] == pytest.approx(4.0)  # robot clock only
+    assert loaded[0]["glances"] == 7 and loaded[1]["glances"] is None
 
 
 def test_the_report_has_a_table_per_world_times_apart_and_names_worlds_and_seeds(tmp_path):
@@ -61,7 +62,7 @@ def test_the_report_has_a_table_per_world_times_apart_and_names_worlds_and_seeds
     for world in ("paper-lab", "office"):
         for method in ("syt", "frontier", "oracle"):
             for seed in (0, 1):
-                _row(results, method, world, "uniform", seed, 100.0 + 50 * (method == "syt"), 30.0)
+                _row(results, method, world, "uniform", seed, 100.0 + 50 * (method == "syt"), 30.0, glances=4 + seed)
     write_report(results, tmp_path)
     text = (tmp_path / "report.md").read_text()
     for section in ("## Per world", "### paper-lab", "### office", "## Time: motion and processing",
@@ -72,6 +73,7 @@ def test_the_report_has_a_table_per_world_times_apart_and_names_worlds_and_seeds
     assert "| SYT cost 3, uniform | 2 | 100.0% |" in office and "| frontier, uniform | 2 | 100.0% |" in office
     # motion 2.50 min, processing 0.50, their sum 3.00: shown apart and summed
     assert "| 2.50 | 0.50 | 3.00 |" in office
+    assert "| Looks | Glances | Distance (m) |" in office and "| 6.0 | 4.5 | 3.00 |" in office  # glances: 4 and 5
     assert "about 15 s of processing per action" in text and "5.0 s of processing per action" in text
     assert "paper-lab, office; seeds 0,1" in text
 
