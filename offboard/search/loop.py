@@ -275,6 +275,8 @@ class Search:
         self.state.distance_m += result.distance_m
         self.measure_driving()
         self.state.trail.append((result.pose.x_m, result.pose.y_m))
+        head = self.robot.state()  # the navigator turned the head toward the motion
+        self._pan_tilt = (math.radians(head.pan_deg), math.radians(head.tilt_deg))
         if result.status == "reached":
             self.state.positions.append((result.pose.x_m, result.pose.y_m))
             self._look(decision)  # the look the move was chosen for
