@@ -48,7 +48,7 @@ from offboard.planning.time_model import TimeModel
 from offboard.search.top_view import LookTrace, draw_top_view
 from offboard.perception.voxel_grid import VoxelGrid
 from shared.geometry import Pose2D, RigidTransform
-from shared.messages import Capture
+from shared.messages import Capture, RobotState
 from shared.strict import bounds
 
 log = logging.getLogger(__name__)
@@ -167,7 +167,7 @@ class Search:
             self.planner.set_processing_s(config.planned_processing_s)
         self.measure_driving()
         self.last_footprint = None
-        self._pan_tilt = (math.radians(start.pan_deg), math.radians(start.tilt_deg))
+        self._pan_tilt = head_rad(start)
         self._plans_positions = policy is None  # baselines keep the report's fixed grid
         self._pending_processing_s = 0.0  # planning done towards the coming look
         self._glanced: list[RigidTransform] = []  # the camera poses of the glances so far
@@ -275,8 +275,7 @@ class Search:
         self.state.distance_m += result.distance_m
         self.measure_driving()
         self.state.trail.append((result.pose.x_m, result.pose.y_m))
-        head = self.robot.state()  # the navigator turned the head toward the motion
-        self._pan_tilt = (math.radians(head.pan_deg), math.radians(head.tilt_deg))
+        self._pan_tilt = head_rad(self.robot.state())  # the navigator turned the head toward the motion
         if result.status == "reached":
             self.state.positions.append((result.pose.x_m, result.pose.y_m))
             self._look(decision)  # the look the move was chosen for
@@ -499,6 +498,11 @@ class Search:
         title = (f"{s.status}: {s.actions} looks, {len(s.positions)} positions, {s.distance_m:.1f} m, "
                  f"{self.robot_time_s() / 60:.1f} min robot time")
         draw_top_view(path, self.config.room_m, floor, s.trail, s.looks, self.intrinsics.hfov_rad, s.estimate_m, title)
+
+
+def head_rad(state: RobotState) -> tuple[float, float]:
+    """The pan and tilt a robot reports, in radians."""
+    return math.radians(state.pan_deg), math.radians(state.tilt_deg)
 
 
 def same_view(a: RigidTransform, b: RigidTransform, within_m: float = 0.05, within_deg: float = 3.0) -> bool:
