@@ -462,6 +462,35 @@ def _per_world_md(rows: list[dict]) -> list[str]:
     return lines
 
 
+NEAR_M, FAR_M = 1.5, 3.0  # edges of the groups by SPL's shortest path
+
+
+def distance_group(row: dict) -> str:
+    """Which group by SPL's shortest path a run falls in: the same extra metres cost more SPL the
+    shorter that path is, so methods that look before they drive and those that drive to look part
+    most where the target is near."""
+    shortest = row["shortest_path_m"]
+    if shortest is None:
+        return "no position sees the target"
+    if shortest == 0:
+        return "seen from the start (0 m)"
+    if shortest < NEAR_M:
+        return f"under {NEAR_M:g} m"
+    return f"{NEAR_M:g} m to {FAR_M:g} m" if shortest < FAR_M else f"{FAR_M:g} m or more"
+
+
+def _by_distance_md(rows: list[dict]) -> list[str]:
+    groups: dict[str, list[dict]] = {}
+    for r in sorted(rows, key=lambda r: math.inf if r["shortest_path_m"] is None else r["shortest_path_m"]):
+        groups.setdefault(distance_group(r), []).append(r)
+    lines = ["## By how far the target was", "", "Runs grouped by SPL's shortest path from the start (looks, "
+             "distance and times over successful runs; success and SPL over all).", ""]
+    for name, mine in groups.items():
+        lines += [f"### {name}", "", f"From {scope(mine)}.", ""]
+        lines += _stats_md([_stats(variant, group) for variant, group in variants(mine)], "Variant", False, False)
+    return lines
+
+
 def _priors_md(rows: list[dict]) -> list[str]:
     """SYT with each prior side by side, per cost function."""
     syt = [r for r in rows if r["method"] == "syt"]
@@ -613,7 +642,7 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
     lines += ["### Per method, cost function and prior", ""]
     lines += _stats_md([_stats(name, group) for name, group in variants(rows)], "Variant")
     lines += failures_md(variants(rows), last_looks or {})
-    lines += _per_world_md(rows) + _priors_md(rows)
+    lines += _per_world_md(rows) + _by_distance_md(rows) + _priors_md(rows)
     source = f"the SYT runs ({scope(syt)})"
     every_look = [look for run in looks for look in run]
     lines += calibration_md(calibration(every_look), source)

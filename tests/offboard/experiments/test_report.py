@@ -12,8 +12,8 @@ import pytest
 from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, coverage, coverage_md, parse_look,
                                               read_looks)
 from offboard.experiments.harness import Run, make_row
-from offboard.experiments.report import (COLUMNS, append_row, load_results, prior_gains, scope, spl_margins,
-                                         write_report)
+from offboard.experiments.report import (COLUMNS, append_row, distance_group, load_results, prior_gains, scope,
+                                         spl_margins, write_report)
 from offboard.experiments.world_facts import load_facts
 
 SUMMARY = {"found": True, "status": "found", "actions": 6, "positions_visited": 2, "distance_m": 3.0,
@@ -103,6 +103,24 @@ def test_the_spl_margin_pairs_scenarios_and_the_best_baseline_is_never_the_oracl
     text = (tmp_path / "report.md").read_text()
     assert ("SYT with prior `uniform`: the best baseline (oracle excluded) is **exhaustive** (prior `uniform`), "
             f"SYT − it = **{sum(diffs) / 3:+.3f}**") in text
+
+
+def test_runs_are_grouped_by_how_far_the_target_was_nearest_first(tmp_path):
+    results = tmp_path / "results.csv"
+    shortest_paths = (4.0, "", 1.5, 0.7, 0.0, 2.9, 3.0)
+    for seed, shortest in enumerate(shortest_paths):
+        row = _row(tmp_path / "scratch.csv", "syt", "office", "uniform", seed, 100.0, 30.0)
+        append_row(results, {**row, "shortest_path_m": shortest})
+    groups = [distance_group(r) for r in sorted(load_results(results), key=lambda r: r["seed"])]
+    assert groups == ["3 m or more", "no position sees the target", "1.5 m to 3 m", "under 1.5 m",
+                      "seen from the start (0 m)", "1.5 m to 3 m", "3 m or more"]
+    write_report(results, tmp_path)
+    section = (tmp_path / "report.md").read_text().split("## By how far the target was")[1].split("\n## ")[0]
+    headings = [line[4:] for line in section.splitlines() if line.startswith("### ")]
+    assert headings == ["seen from the start (0 m)", "under 1.5 m", "1.5 m to 3 m", "3 m or more",
+                        "no position sees the target"]
+    runs = [line.split(" | ")[1] for line in section.splitlines() if line.startswith("| SYT cost 3, uniform |")]
+    assert runs == ["1", "1", "2", "2", "1"]
 
 
 def test_processing_not_measured_is_said_and_not_summed(tmp_path):
