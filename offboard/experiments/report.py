@@ -453,12 +453,19 @@ def _stats_md(stats: list[MethodStats], first: str = "Method", latency: bool = T
 
 
 def _per_world_md(rows: list[dict]) -> list[str]:
-    lines = ["## Per world", "", "Each world's runs, per method, cost function and prior (looks, distance and times "
-             "over successful runs; success and SPL over all).", ""]
-    for world in dict.fromkeys(r["world"] for r in rows):
-        mine = [r for r in rows if r["world"] == world]
-        lines += [f"### {world}", "", f"From {scope(mine)}.", ""]
-        lines += _stats_md([_stats(name, group) for name, group in variants(mine)], "Variant", False, False)
+    worlds: dict[str, list[dict]] = {}
+    for r in rows:
+        worlds.setdefault(r["world"], []).append(r)
+    return ["## Per world", "", "Each world's runs, per method, cost function and prior (looks, distance and times "
+            "over successful runs; success and SPL over all).", ""] + _groups_md(worlds)
+
+
+def _groups_md(groups: dict[str, list[dict]]) -> list[str]:
+    """A heading, the scope and a table of variants per group of runs."""
+    lines = []
+    for name, mine in groups.items():
+        lines += [f"### {name}", "", f"From {scope(mine)}.", ""]
+        lines += _stats_md([_stats(variant, group) for variant, group in variants(mine)], "Variant", False, False)
     return lines
 
 
@@ -467,8 +474,8 @@ NEAR_M, FAR_M = 1.5, 3.0  # edges of the groups by SPL's shortest path
 
 def distance_group(row: dict) -> str:
     """Which group by SPL's shortest path a run falls in: the same extra metres cost more SPL the
-    shorter that path is, so methods that look before they drive and those that drive to look part
-    most where the target is near."""
+    shorter that path is, so methods differ most where the target is near (one that looks all around
+    before it drives loses little there)."""
     shortest = row["shortest_path_m"]
     if shortest is None:
         return "no position sees the target"
@@ -483,12 +490,8 @@ def _by_distance_md(rows: list[dict]) -> list[str]:
     groups: dict[str, list[dict]] = {}
     for r in sorted(rows, key=lambda r: math.inf if r["shortest_path_m"] is None else r["shortest_path_m"]):
         groups.setdefault(distance_group(r), []).append(r)
-    lines = ["## By how far the target was", "", "Runs grouped by SPL's shortest path from the start (looks, "
-             "distance and times over successful runs; success and SPL over all).", ""]
-    for name, mine in groups.items():
-        lines += [f"### {name}", "", f"From {scope(mine)}.", ""]
-        lines += _stats_md([_stats(variant, group) for variant, group in variants(mine)], "Variant", False, False)
-    return lines
+    return ["## By how far the target was", "", "Runs grouped by SPL's shortest path from the start (looks, "
+            "distance and times over successful runs; success and SPL over all).", ""] + _groups_md(groups)
 
 
 def _priors_md(rows: list[dict]) -> list[str]:
