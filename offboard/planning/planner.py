@@ -63,7 +63,7 @@ class PlannerConfig:
     viewpoints: int = field(default=24, metadata=bounds(0, 1000))  # aimed at the belief, per decision
     viewpoint_lattice_m: float = field(default=0.25, metadata=bounds(0.05, 2.0))  # they snap to it (cached geometry)
     visit_looks: int = field(default=4, metadata=bounds(1, 64))  # the most looks a visit is credited with
-    leave_margin: float = field(default=2.0, metadata=bounds(1.0, 100.0))  # the "rate" rule leaves when a visit
+    leave_margin: float = field(default=3.0, metadata=bounds(1.0, 100.0))  # the "rate" rule leaves when a visit
     # finds this many times more per second than the best look here
     tilts_deg: tuple[float, ...] = (0.0, 30.0)  # the report's two tilts
     view_overlap: float = field(default=0.4, metadata=bounds(0.0, 0.9))  # between neighbouring settings

@@ -119,7 +119,8 @@ def test_a_target_seen_on_the_way_stops_the_move(tmp_path):
     # room, and a frame toward the motion shows the target's picture on a shelf ahead
     world = Path(__file__).parents[3] / "shared" / "worlds" / "dev" / "room-1000-0.toml"
     config = tmp_path / "fixed.toml"
-    config.write_text("planned_processing_s = 0.45\n")  # the run repeats exactly, however loaded the machine
+    # the run repeats exactly, however loaded the machine; the margin fixes the trajectory that passes the target
+    config.write_text("planned_processing_s = 0.45\n[planner]\nleave_margin = 2.0\n")
     summary, out = _search(tmp_path, str(world), "--start", "3.43,4.67,195", "--seed", "3",
                            extra=("--config", str(config)))
     log = (out / "search.log").read_text()
