@@ -170,7 +170,7 @@ class Search:
         self._pan_tilt = head_rad(start)
         self._plans_positions = policy is None  # baselines keep the report's fixed grid
         self._pending_processing_s = 0.0  # planning done towards the coming look
-        self._glanced: list[RigidTransform] = []  # the camera poses of the glances so far
+        self._glanced: list[RigidTransform] = []  # the camera poses of the glances so far, in odometry
         self._glance_recording_s = 0.0  # wall time logging glances during the current move
         self._squeeze_to: tuple[float, float] | None = None  # a move chosen on the bare radius (_choose)
         self.on_action: Callable[[Search], None] | None = None  # after every action (the checkpoint)
@@ -328,11 +328,13 @@ class Search:
         seen before the robot drives past it. A detection stops the move, so the search decides again
         from there: a look to confirm it, or the target is found already. A view already glanced at
         (a move begun again from where the last one stopped) is skipped: the same image says nothing
-        new, and counted twice it would make a weak false detection look confirmed."""
-        camera = self.mount.camera_in_world(pose, math.radians(capture.pan_deg), math.radians(capture.tilt_deg))
-        if any(same_view(camera, view) for view in self._glanced):
+        new, and counted twice it would make a weak false detection look confirmed. Views are compared
+        where odometry puts them: a scan match between two frames moves the corrected pose, not the camera."""
+        head = math.radians(capture.pan_deg), math.radians(capture.tilt_deg)
+        view = self.mount.camera_in_world(capture.pose.to_pose(), *head)
+        if any(same_view(view, earlier) for earlier in self._glanced):
             return ""
-        self._glanced.append(camera)
+        self._glanced.append(view)
         detector, table = self._planning_detector()
         obs = self.perception.observe(capture, pose, detector, update_map=False, disparity=disparity)
         _, found = self._interpret(obs, table, "glance after look")
