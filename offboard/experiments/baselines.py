@@ -54,7 +54,8 @@ class BaselineConfig:
     collapsed_mass: float = field(default=0.1, metadata=bounds(0.0, 1.0))
     frontier_radius_m: float = field(default=0.75, metadata=bounds(0.05, 10.0))  # "adjacent" to unknown floor
     oracle_looks: int = field(default=3, metadata=bounds(1, 100))  # looks at the target before giving up
-    oracle_moves: int = field(default=2, metadata=bounds(1, 100))  # tries to reach the viewpoint
+    oracle_moves: int = field(default=2, metadata=bounds(1, 100))  # moves to the viewpoint that gain no ground
+    oracle_headway_m: float = field(default=0.1, metadata=bounds(0.01, 5.0))  # ... less than this
     # viewpoints to try, each at least oracle_retry_m from those tried: another view, not the same one a step off
     oracle_viewpoints: int = field(default=2, metadata=bounds(1, 100))
     oracle_retry_m: float = field(default=1.0, metadata=bounds(0.0, 10.0))
@@ -200,6 +201,7 @@ class Oracle:
         self.goal: tuple[float, float] | None = None
         self.tried: tuple[tuple[float, float], ...] = ()  # viewpoints whose looks did not find it
         self.moves = self.looks = 0
+        self._sent_from_m: float | None = None  # how far from its viewpoint the last move began
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
@@ -214,9 +216,13 @@ class Oracle:
             self.goal = self._viewpoint((pose.x_m, pose.y_m))
         if self.goal is None:
             return Decision("stop", "oracle: no reachable position sees the target", status="exhausted")
-        away = pose.distance_to(*self.goal) > self.config.arrived_m
-        if away and self.moves < self.config.oracle_moves:
+        to_goal_m = pose.distance_to(*self.goal)
+        if self._sent_from_m is not None and to_goal_m <= self._sent_from_m - self.config.oracle_headway_m:
+            self.moves -= 1  # it gained ground (a detection on the way stopped it): not a failed try
+        self._sent_from_m = None
+        if to_goal_m > self.config.arrived_m and self.moves < self.config.oracle_moves:
             self.moves += 1
+            self._sent_from_m = to_goal_m
             return _within_budget(self.planner, self._move(pose), elapsed_s)
         self.looks += 1
         return _within_budget(self.planner, self._look_from(pose, pan_rad, tilt_rad, 0.0), elapsed_s)

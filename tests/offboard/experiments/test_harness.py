@@ -290,6 +290,22 @@ def test_an_oracle_whose_looks_miss_tries_another_viewpoint_then_gives_up():
     assert again.kind == "stop" and again.reason == stop.reason
 
 
+def test_an_oracle_stopped_on_the_way_drives_on_while_it_gains_ground_and_gives_up_when_it_does_not():
+    planner = _planner()
+    policy = BASELINES["oracle"](BaselineContext(truth=TRUTH))(planner)
+    config = BaselineContext().config
+    start = np.array([5.5, 0.5])
+    goal = np.array(_decide(policy, planner, Pose2D(*start, math.pi)).position_m)
+    step = (goal - start) / np.linalg.norm(goal - start) * 0.12  # more than oracle_headway_m
+    here = start
+    for _ in range(config.oracle_moves + 2):  # detections on the way stop every move after 0.12 m
+        here = here + step
+        assert _decide(policy, planner, Pose2D(*here, 0.0)).kind == "move"
+    for _ in range(config.oracle_moves - 1):  # stopped again before it drove at all
+        assert _decide(policy, planner, Pose2D(*here, 0.0)).kind == "move"
+    assert _decide(policy, planner, Pose2D(*here, 0.0)).kind == "look"  # out of tries: it looks from here
+
+
 def test_a_tall_obstacle_hides_the_target_and_a_low_one_does_not():
     def sees_from(box_top_m: float) -> bool:
         truth = Truth((6.0, 4.0, 2.5), (Obstacle((2.5, 1.8, 0.0), (3.5, 2.0, box_top_m)),), (3.0, 3.5, 0.9), -90.0)
