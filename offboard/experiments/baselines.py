@@ -200,7 +200,7 @@ class Oracle:
         self.planner, self.truth, self.config = planner, truth, config
         self.goal: tuple[float, float] | None = None
         self.tried: tuple[tuple[float, float], ...] = ()  # viewpoints whose looks did not find it
-        self.moves = self.looks = 0
+        self.moves = self.looks = 0  # moves: to this viewpoint, that gained no ground
         self._sent_from_m: float | None = None  # how far from its viewpoint the last move began
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
@@ -217,11 +217,10 @@ class Oracle:
         if self.goal is None:
             return Decision("stop", "oracle: no reachable position sees the target", status="exhausted")
         to_goal_m = pose.distance_to(*self.goal)
-        if self._sent_from_m is not None and to_goal_m <= self._sent_from_m - self.config.oracle_headway_m:
-            self.moves -= 1  # it gained ground (a detection on the way stopped it): not a failed try
+        if self._sent_from_m is not None and to_goal_m > self._sent_from_m - self.config.oracle_headway_m:
+            self.moves += 1  # a failed try; one that gained ground was stopped by a detection on the way
         self._sent_from_m = None
         if to_goal_m > self.config.arrived_m and self.moves < self.config.oracle_moves:
-            self.moves += 1
             self._sent_from_m = to_goal_m
             return _within_budget(self.planner, self._move(pose), elapsed_s)
         self.looks += 1
