@@ -13,8 +13,14 @@ import numpy as np
 import pytest
 
 from shared.launch import LoopbackAgent, onboard_agent
+from offboard.perception.detection import TargetModel, make_detector
 from offboard.perception.occupancy import FloorMap
+from offboard.perception.voxel_grid import VoxelGrid
+from offboard.planning import priors
 from offboard.robot.robot_client import RobotClient
+from offboard.search.loop import Search, SearchConfig
+from offboard.search.run import detectability_table
+from onboard.sim.textures import load_picture
 from shared.transport import TransportConfig
 
 RES = 0.05  # the floor maps' cell size in the navigation tests
@@ -79,6 +85,18 @@ def sim_agent(tmp_path_factory) -> Iterator[tuple[LoopbackAgent, RobotClient]]:
     """One fast-clock paper-lab agent shared by a module's tests."""
     with running_agent(tmp_path_factory.mktemp("agent"), "--world", "paper-lab") as pair:
         yield pair
+
+
+@pytest.fixture
+def lab_search(sim_agent) -> Search:
+    """A search in this process on the paper-lab agent: the bundled target, SIFT, a uniform prior, and
+    a planned processing time, so that its decisions repeat however loaded the machine is."""
+    _, robot = sim_agent
+    config = SearchConfig(planned_processing_s=0.45)
+    model = TargetModel((load_picture("target", Path(".")),), (0.23, 0.23, 0.23))
+    detector = make_detector("sift", model, robot.info().intrinsics.to_intrinsics())
+    return Search(robot, config, {"sift": (detector, detectability_table("sift", detector, {}))},
+                  priors.uniform(VoxelGrid(config.room_m, config.resolution_m)), [])
 
 
 def floor_map(occupied: np.ndarray, radius_m: float = 0.0) -> FloorMap:

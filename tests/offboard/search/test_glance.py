@@ -5,29 +5,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import pytest
 
-from offboard.perception.detection import TargetModel, make_detector
 from offboard.perception.stereo import StereoMatcher
-from offboard.perception.voxel_grid import VoxelGrid
-from offboard.planning import priors
-from offboard.search.loop import Search, SearchConfig
-from offboard.search.run import detectability_table
-from onboard.sim.textures import load_picture
 
 pytestmark = pytest.mark.integration
 
 
-def test_a_view_is_glanced_at_once_however_a_scan_match_has_moved_the_pose_since(sim_agent):
-    _, robot = sim_agent
-    config = SearchConfig(planned_processing_s=0.45)
-    model = TargetModel((load_picture("target", Path(".")),), (0.23, 0.23, 0.23))
-    detector = make_detector("sift", model, robot.info().intrinsics.to_intrinsics())
-    search = Search(robot, config, {"sift": (detector, detectability_table("sift", detector, {}))},
-                    priors.uniform(VoxelGrid(config.room_m, config.resolution_m)), [])
-    stereo = StereoMatcher(config.stereo)
+def test_a_view_is_glanced_at_once_however_a_scan_match_has_moved_the_pose_since(lab_search):
+    search, robot = lab_search, lab_search.robot
+    stereo = StereoMatcher(search.config.stereo)
 
     def glance_at(pan_deg: float, heading_correction_deg: float = 0.0) -> None:
         robot.look(pan_deg, -25.0)

@@ -4,28 +4,16 @@ robot's head after a move the navigator drove."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import pytest
 
-from offboard.perception.detection import TargetModel, make_detector
-from offboard.perception.voxel_grid import VoxelGrid
-from offboard.planning import priors
 from offboard.planning.planner import Decision
-from offboard.search.loop import Search, SearchConfig
-from offboard.search.run import detectability_table
-from onboard.sim.textures import load_picture
 
 pytestmark = pytest.mark.integration
 
 
-def test_after_a_move_that_fails_the_search_knows_the_head_points_where_the_navigator_left_it(sim_agent):
-    _, robot = sim_agent  # the paper lab: the robot at (4.5, 0.6) facing north, the centre table 1.7 m ahead
-    config = SearchConfig(planned_processing_s=0.45)
-    model = TargetModel((load_picture("target", Path(".")),), (0.23, 0.23, 0.23))
-    detector = make_detector("sift", model, robot.info().intrinsics.to_intrinsics())
-    search = Search(robot, config, {"sift": (detector, detectability_table("sift", detector, {}))},
-                    priors.uniform(VoxelGrid(config.room_m, config.resolution_m)), [])
+def test_after_a_move_that_fails_the_search_knows_the_head_points_where_the_navigator_left_it(lab_search):
+    search, robot = lab_search, lab_search.robot  # the robot at (4.5, 0.6) facing north, the centre table 1.7 m ahead
     search._look(Decision("look", "west, up", azimuth_rad=math.pi, tilt_rad=math.radians(30.0), setting=0))
     looked = search._pan_tilt
     assert looked == pytest.approx((math.radians(90.0), math.radians(30.0)))
