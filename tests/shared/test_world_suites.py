@@ -10,7 +10,7 @@ import pytest
 from shared.world import (WORLDS_DIR, WorldError, expand_suites, load_world, suite_names, suite_of, suite_worlds,
                           world_toml)
 
-SUITES = {"dev": (12, 1000), "test": (20, 2000)}
+SUITES = {"dev": (32, 1000), "test": (20, 2000)}
 
 
 def test_the_suites_and_their_sizes():
