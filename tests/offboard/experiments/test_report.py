@@ -93,7 +93,7 @@ def test_the_spl_margin_pairs_scenarios_and_the_best_baseline_is_never_the_oracl
     margin = {m.baseline: m for m in spl_margins(rows) if m.prior == "uniform"}
     assert margin["exhaustive"].scenarios == 3
     assert margin["exhaustive"].difference == pytest.approx(sum(diffs) / 3)
-    assert margin["exhaustive"].stderr == pytest.approx(statistics.stdev(diffs) / 3 ** 0.5)
+    assert margin["exhaustive"].stderr is None  # three seeds of one scenario are one sample, not three
     assert [d for _, d in margin["exhaustive"].by_seed] == pytest.approx(diffs)
     assert margin["oracle"].difference == 0.0
     tables = {m.baseline: m for m in spl_margins(rows) if m.prior == "tables"}
@@ -103,6 +103,27 @@ def test_the_spl_margin_pairs_scenarios_and_the_best_baseline_is_never_the_oracl
     text = (tmp_path / "report.md").read_text()
     assert ("SYT with prior `uniform`: the best baseline (oracle excluded) is **exhaustive** (prior `uniform`), "
             f"SYT − it = **{sum(diffs) / 3:+.3f}**") in text
+
+
+def test_the_standard_error_counts_each_scenario_once_its_seeds_averaged(tmp_path):
+    results = tmp_path / "results.csv"
+    driven = {"office": (8.0, 9.0, 10.0), "paper-lab": (12.0, 16.0, 20.0)}
+    for world, metres in driven.items():
+        for seed, distance_m in enumerate(metres):
+            _row(results, "syt", world, "uniform", seed, 100.0, 30.0, distance_m=0.0)
+            _row(results, "exhaustive", world, "uniform", seed, 100.0, 30.0, distance_m=distance_m)
+            _row(results, "syt", world, "tables", seed, 100.0, 30.0, distance_m=distance_m)
+    rows = load_results(results)
+    spl = {(r["method"], r["prior"], r["world"], r["seed"]): r["spl"] or 0.0 for r in rows}
+    diffs = {(w, s): spl["syt", "uniform", w, s] - spl["exhaustive", "uniform", w, s] for w in driven for s in range(3)}
+    assert len(set(diffs.values())) == 6
+    scenario_means = [statistics.fmean(diffs[w, s] for s in range(3)) for w in driven]
+    expected = statistics.stdev(scenario_means) / 2 ** 0.5
+    assert expected != pytest.approx(statistics.stdev(diffs.values()) / 6 ** 0.5)
+    margin = {m.baseline: m for m in spl_margins(rows) if m.prior == "uniform"}["exhaustive"]
+    assert margin.scenarios == 6 and margin.stderr == pytest.approx(expected)
+    tables = {g.prior: g for g in prior_gains(rows)}["tables"]  # the same pairs, the other way round
+    assert tables.stderr == pytest.approx(expected)
 
 
 def test_runs_are_grouped_by_how_far_the_target_was_nearest_first(tmp_path):
@@ -161,7 +182,8 @@ def test_each_prior_is_paired_with_uniform_on_the_same_scenarios(tmp_path):
     assert (gain.looks, gain.reference_looks) == (4, 10)  # looks only where both found it
     write_report(results, tmp_path)
     text = (tmp_path / "report.md").read_text()
-    assert f"| 3 | surfaces | 2 | {gain.spl:.3f} | {gain.reference_spl:.3f} | {gain.difference:+.3f} (" in text
+    assert gain.stderr is None  # two seeds of one scenario: one sample, so no standard error to show
+    assert f"| 3 | surfaces | 2 | {gain.spl:.3f} | {gain.reference_spl:.3f} | {gain.difference:+.3f} | 1 |" in text
 
 
 def test_the_calibration_bins_looks_and_checks_each_bin_with_enough_looks(tmp_path):
