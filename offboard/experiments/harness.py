@@ -463,7 +463,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--methods", type=_list(str, ("syt", *BASELINE_METHODS)), metavar="M,..",
                         help=f"syt, {', '.join(BASELINE_METHODS)}")
     parser.add_argument("--starts", type=int, metavar="N", help="robot starts per world (derived from the world)")
-    parser.add_argument("--targets", type=int, metavar="N", help="target placements per world (on its tables)")
+    parser.add_argument("--targets", type=int, metavar="N",
+                        help="target placements per world (its own, then on its tables)")
     parser.add_argument("--start", type=floats(3, "--start"), action="append", metavar="X,Y,HEADING_DEG",
                         help="use these robot starts instead (repeatable)")
     parser.add_argument("--target", type=floats(4, "--target"), action="append", metavar="X,Y,Z,YAW_DEG",

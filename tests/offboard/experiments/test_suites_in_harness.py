@@ -32,3 +32,13 @@ def test_a_suite_worlds_first_placement_is_its_own_target_and_the_oracle_can_see
     drive = SeeingCriteria(robot_radius_m=DRIVE_CLEARANCE_M)
     assert math.isfinite(viewpoint(world.truth(world.target), world.start[:2], drive)[1])
     assert target_placements(load_facts("paper-lab"), 4)[0] != load_facts("paper-lab").target  # bundled: tables first
+
+
+def test_a_room_of_ones_own_is_searched_for_its_own_target_wherever_the_file_lies(tmp_path):
+    copy = tmp_path / "my-room.toml"  # as `worlds generate --out DIR` writes it, outside the suites
+    original = suite_worlds("dev")[3]
+    copy.write_text(original.read_text())
+    world = load_facts(str(copy))
+    placements = target_placements(world, 2)
+    assert placements[0] == world.target and placements[1] != world.target
+    assert placements == target_placements(load_facts(f"dev/{original.stem}"), 2)
