@@ -216,6 +216,11 @@ def _is_bundled_name(name: str) -> bool:
     return len(parts) == 1 or (len(parts) == 2 and parts[0] in suite_names())
 
 
+def is_bundled_room(path: str | Path) -> bool:
+    """Whether a world file is one of the rooms bundled beside ``paper-lab`` (not a suite's, not a user's)."""
+    return Path(path).resolve().parent == WORLDS_DIR.resolve()
+
+
 def suite_of(path: str | Path) -> str | None:
     """The bundled suite a world file belongs to, or None."""
     folder = Path(path).resolve().parent

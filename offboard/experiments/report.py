@@ -351,12 +351,11 @@ def spl_margins(rows: list[dict], cost: int = 3) -> list[SplMargin]:
             common = sorted(set(syt) & set(theirs), key=str)
             if not common:
                 continue
-            diffs = [syt[s] - theirs[s] for s in common]
-            by_seed = tuple((seed, statistics.fmean([d for s, d in zip(common, diffs) if s[-1] == seed]))
+            diffs = {s: syt[s] - theirs[s] for s in common}
+            by_seed = tuple((seed, statistics.fmean([d for s, d in diffs.items() if s[-1] == seed]))
                             for seed in sorted({s[-1] for s in common}))
             out.append(SplMargin(name, prior, their_prior, len(common), statistics.fmean(syt[s] for s in common),
-                                 statistics.fmean(theirs[s] for s in common), _stderr(dict(zip(common, diffs))),
-                                 by_seed))
+                                 statistics.fmean(theirs[s] for s in common), _stderr(diffs), by_seed))
     return out
 
 

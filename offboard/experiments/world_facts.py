@@ -27,7 +27,7 @@ from offboard.perception.occupancy import FloorMap
 from shared.geometry import HeadMount
 from shared.limits import PanTiltLimits
 from shared.strict import bounds
-from shared.world import WORLDS_DIR, Box, load_world, resolve_world
+from shared.world import Box, is_bundled_room, load_world, resolve_world
 
 Vec3 = tuple[float, float, float]
 Start = tuple[float, float, float]  # x, y, heading° (the agent's --start)
@@ -315,19 +315,18 @@ def _table_placements(world: WorldFacts, table: Box, min_clear_m: float = 0.6) -
 
 def target_placements(world: WorldFacts, count: int = 4,
                       drive_clearance_m: float = DRIVE_CLEARANCE_M) -> list[Placement]:
-    """Up to ``count`` placements: the world's own target first, then the world's tables', taken in turn
-    from each table (report Fig. 5b); fewer than ``count`` if that is all there is. The report's bundled
-    rooms (``paper-lab`` and the others beside it) are the exception: their scenarios are the report's,
-    on their tables, and their own target comes last, only if the tables offer fewer. A suite's or a
-    user's room (generated and checked, or written by hand) is searched for the target it declares,
-    wherever the file lies. A table placement
-    counts only if the robot, with its navigation clearance, can drive from the world's start to where
-    it sees the target, with room to stop :data:`ARRIVAL_MARGIN_M` off."""
+    """Up to ``count`` placements: the world's own target first (a suite's or a user's room is searched
+    for the target it declares, wherever the file lies), then the world's tables', taken in turn from
+    each table (report Fig. 5b); fewer than ``count`` if that is all there is. The rooms bundled beside
+    ``paper-lab`` keep the report's scenarios: their tables' first, their own target last, and only if
+    the tables offer fewer. A table placement counts only if the robot, with its navigation clearance,
+    can drive from the world's start to where it sees the target, with room to stop
+    :data:`ARRIVAL_MARGIN_M` off."""
     drive = SeeingCriteria(robot_radius_m=drive_clearance_m)
     per_table = [[p for p in _table_placements(world, t)
                   if math.isfinite(viewpoint(world.truth(p), world.start[:2], drive, ARRIVAL_MARGIN_M)[1])]
                  for t in world.tables()]
-    chosen = [] if Path(world.path).resolve().parent == WORLDS_DIR.resolve() else [world.target]
+    chosen = [] if is_bundled_room(world.path) else [world.target]
     for rank in range(max((len(p) for p in per_table), default=0)):
         chosen += [p[rank] for p in per_table if rank < len(p)]
     if len(chosen) < count and world.target not in chosen:
