@@ -9,7 +9,8 @@ it drives SYT:
 - ``frontier``: the nearest candidate next to unknown floor, else the nearest unvisited one;
 - ``oracle``: drive to the closest floor position from which the detector finds the target almost
   surely (its measured table), with room to stop a little off, and look straight at it (it is given
-  the truth); should those looks miss, the closest such position at least 1 m from it.
+  the truth); should those looks miss, the closest such position at least 1 m from it. Where it
+  starts in view of the target, it looks from there first.
 
 "Look around" takes every camera setting of the planner once, quickest to reach first. A weak
 detection needs a second look before the search ends; once a detection has collapsed the belief onto
@@ -29,14 +30,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
 
 from offboard.navigation import grid_planner
 from offboard.experiments.world_facts import (ARRIVAL_MARGIN_M, DRIVE_CLEARANCE_M, SeeingCriteria, Truth,
-                                              true_floor_map, viewpoint)
+                                              seeing_cells, true_floor_map, viewpoint)
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.planning.planner import Decision, SearchPlanner
 from offboard.search.loop import Policy
@@ -194,19 +195,27 @@ class Frontier(_Tour):
 
 
 class Oracle:
-    """Knows where the target is: drives to the closest position that sees it and looks at it."""
+    """Knows where the target is: drives to the closest position that sees it and looks at it. Where
+    it starts in view of the target (as SPL counts seeing, whose shortest path is then nil), it looks
+    from there first: driving to its own stricter viewpoint would cost SPL for nothing."""
 
     def __init__(self, planner: SearchPlanner, truth: Truth, config: BaselineConfig):
         self.planner, self.truth, self.config = planner, truth, config
         self.goal: tuple[float, float] | None = None
+        self._from_start: bool | None = None  # looking from where it started (None: not yet asked)
         self.tried: tuple[tuple[float, float], ...] = ()  # viewpoints whose looks did not find it
         self.moves = self.looks = 0  # moves: to this viewpoint, that gained no ground
         self._sent_from_m: float | None = None  # how far from its viewpoint the last move began
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
+        if self._from_start is None:
+            self._from_start = self._seen_from((pose.x_m, pose.y_m))
+            self.goal = (pose.x_m, pose.y_m) if self._from_start else None
         if self.looks >= self.config.oracle_looks:
-            if self.goal not in self.tried:  # asked again after stopping (the search's squeeze retry)
+            if self._from_start:  # SPL's view missed: its own viewpoints are still all to try
+                self._from_start = False
+            elif self.goal not in self.tried:  # asked again after stopping (the search's squeeze retry)
                 self.tried += (self.goal,)
             if len(self.tried) >= self.config.oracle_viewpoints:
                 return Decision("stop", f"oracle: {self.looks} looks from each of {len(self.tried)} viewpoints did "
@@ -232,9 +241,18 @@ class Oracle:
         strict, avoid = self.config.oracle_view, dict(avoid=self.tried, avoid_m=self.config.oracle_retry_m)
         goal, _ = viewpoint(self.truth, start_xy, strict, self.config.arrived_m, **avoid)
         if goal is None:
-            goal, _ = viewpoint(self.truth, start_xy, SeeingCriteria(table=strict.table,
-                                                                     robot_radius_m=strict.robot_radius_m), **avoid)
+            goal, _ = viewpoint(self.truth, start_xy, replace(self._spl_view, robot_radius_m=strict.robot_radius_m),
+                                **avoid)
         return goal
+
+    @property
+    def _spl_view(self) -> SeeingCriteria:
+        return SeeingCriteria(table=self.config.oracle_view.table)
+
+    def _seen_from(self, xy: tuple[float, float]) -> bool:
+        """Does the target lie in view from ``xy``, as SPL's shortest path counts seeing?"""
+        floor = true_floor_map(self.truth, self._spl_view)
+        return bool(seeing_cells(self.truth, floor, self._spl_view)[grid_planner.cell_of(floor, xy)])
 
     def _move(self, pose: Pose2D) -> Decision:
         gx, gy = self.goal

@@ -290,6 +290,26 @@ def test_an_oracle_whose_looks_miss_tries_another_viewpoint_then_gives_up():
     assert again.kind == "stop" and again.reason == stop.reason
 
 
+def test_an_oracle_that_starts_in_view_looks_from_there_before_driving_to_its_own_viewpoint():
+    planner = _planner()
+    config = BaselineContext().config
+    spl_view = SeeingCriteria(table=config.oracle_view.table)
+    floor = true_floor_map(TRUTH, spl_view)
+    strict, _ = viewpoint(TRUTH, (5.5, 0.5), config.oracle_view, config.arrived_m)
+    cells = np.argwhere(seeing_cells(TRUTH, floor, spl_view))
+    centres = grid_planner.cell_centers(floor, cells)
+    start = centres[np.argmax(np.hypot(*(centres - strict).T))]  # sees it, as SPL counts, far from the strict view
+    assert viewpoint(TRUTH, tuple(start))[1] == 0.0
+    policy = BASELINES["oracle"](BaselineContext(truth=TRUTH))(planner)
+    looks = [_decide(policy, planner, Pose2D(*start, 0.0)) for _ in range(config.oracle_looks)]
+    assert all(look.kind == "look" for look in looks)
+    move = _decide(policy, planner, Pose2D(*start, 0.0))  # those looks missed: on to its own viewpoint
+    assert move.kind == "move" and np.allclose(move.position_m, viewpoint(TRUTH, tuple(start), config.oracle_view,
+                                                                            config.arrived_m)[0])
+    elsewhere = BASELINES["oracle"](BaselineContext(truth=TRUTH))(planner)
+    assert _decide(elsewhere, planner, Pose2D(5.5, 0.5, 0.0)).kind == "move"  # out of view: it drives at once
+
+
 def test_an_oracle_stopped_on_the_way_drives_on_while_it_gains_ground_and_gives_up_when_it_does_not():
     planner = _planner()
     policy = BASELINES["oracle"](BaselineContext(truth=TRUTH))(planner)
