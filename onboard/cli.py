@@ -192,7 +192,7 @@ def run_worlds(argv: list[str]) -> int:
     generate.add_argument("--out", type=Path, required=True, metavar="DIR")
     views = commands.add_parser("views", help="render stereo pairs with true depth of worlds, to score stereo on")
     views.add_argument("--worlds", required=True, metavar="NAMES",
-                       help="comma-separated suites (dev, test), bundled names or world files")
+                       help="comma-separated suites (dev, test), bundled names, world files or folders of them")
     views.add_argument("--per-world", type=int, default=25, metavar="N")
     views.add_argument("--seed", type=int, default=0, metavar="S")
     views.add_argument("--out", type=Path, required=True, metavar="DIR")

@@ -201,13 +201,26 @@ def suite_worlds(name: str) -> list[Path]:
 
 def expand_suites(names: Iterable[str]) -> tuple[str, ...]:
     """World names and files with every suite name replaced by the names of its worlds
-    (``test`` → ``test/room-2000-0``, ...: bundled names that ``load_world`` takes anywhere)."""
+    (``test`` → ``test/room-2000-0``, ...: bundled names that ``load_world`` takes anywhere) and every
+    folder by its world files (rooms of one's own, such as ``worlds generate --out DIR`` writes)."""
     suites = suite_names()
     expanded: list[str] = []
     for name in names:
-        is_suite = name in suites and not Path(name).is_file()
-        expanded += [f"{name}/{path.stem}" for path in suite_worlds(name)] if is_suite else [name]
+        if name in suites and not Path(name).is_file():
+            expanded += [f"{name}/{path.stem}" for path in suite_worlds(name)]
+        elif Path(name).is_dir():
+            expanded += [str(path) for path in folder_worlds(Path(name))]
+        else:
+            expanded.append(name)
     return tuple(expanded)
+
+
+def folder_worlds(folder: Path) -> list[Path]:
+    """The world files (``*.toml``) of a folder, sorted; refused if it holds none."""
+    worlds = sorted(folder.glob("*.toml"))
+    if not worlds:
+        raise WorldError(f"{folder}: a folder with no world files (*.toml) in it")
+    return worlds
 
 
 def _is_bundled_name(name: str) -> bool:

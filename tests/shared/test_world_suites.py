@@ -48,6 +48,17 @@ def test_suite_names_expand_to_their_worlds_among_other_worlds():
     assert suite_of(WORLDS_DIR / "paper-lab.toml") is None
 
 
+def test_a_folder_expands_to_its_world_files_and_an_empty_one_is_refused(tmp_path):
+    for name in ("room-7-1.toml", "room-7-0.toml", "notes.md"):
+        (tmp_path / name).write_text("")
+    assert expand_suites(["paper-lab", str(tmp_path)]) == ("paper-lab", str(tmp_path / "room-7-0.toml"),
+                                                           str(tmp_path / "room-7-1.toml"))
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(WorldError, match="empty: a folder with no world files"):
+        expand_suites([str(empty)])
+
+
 def test_unknown_suites_and_suite_paths_are_refused_naming_them():
     with pytest.raises(WorldError, match="nope: no such world suite .*dev, test"):
         suite_worlds("nope")
