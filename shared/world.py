@@ -196,7 +196,7 @@ def suite_worlds(name: str) -> list[Path]:
     """The world files of a bundled suite, sorted."""
     if name not in suite_names():
         raise WorldError(f"{name}: no such world suite (suites: {', '.join(suite_names())})")
-    return sorted((WORLDS_DIR / name).glob("*.toml"))
+    return folder_worlds(WORLDS_DIR / name)
 
 
 def expand_suites(names: Iterable[str]) -> tuple[str, ...]:
