@@ -25,7 +25,8 @@ World files are TOML (a contract other tools write; ``shared/worlds`` bundles th
     position = [1.6, 3.6, 0.75]   # centre of the target's bottom face
     yaw_deg = -90                 # optional (default 0): direction its picture faces, 0 = +x, CCW
     sides = 1                     # optional (default 1): pictured sides, 1 (the face yaw points to)
-                                  # or 4 (every vertical face: recognisable from any direction)
+                                  # or 4 (every vertical face: recognisable from any direction;
+                                  # size[0] == size[1], since every face must show the same picture)
 
     [robot]
     start = [4.5, 0.6]            # x, y
@@ -425,10 +426,13 @@ def _validate(world: World) -> None:
         key = f"obstacle[{i}]"
         lo, hi = np.array(box.min_m), np.array(box.max_m)
         if np.any(hi <= lo):
-            raise WorldError(f"{key}.max: max must exceed min on every axis (got min {list(box.min_m)}, "
-                             f"max {list(box.max_m)})")
-        if np.any(lo < -_TOL_M) or np.any(hi > size + _TOL_M):
-            raise WorldError(f"{key}.min: obstacle {box.name!r} lies outside the room {list(size)}")
+            raise WorldError(f"{key}.max: max must exceed min on every axis (got min {_listed(box.min_m)}, "
+                             f"max {_listed(box.max_m)})")
+        if np.any(lo < -_TOL_M):
+            raise WorldError(f"{key}.min: obstacle {box.name!r} lies outside the room (min {_listed(lo)})")
+        if np.any(hi > size + _TOL_M):
+            raise WorldError(f"{key}.max: obstacle {box.name!r} lies outside the room {_listed(size)} "
+                             f"(max {_listed(hi)})")
     _validate_target(world, size)
     for i, poster in enumerate(world.posters):
         corners = poster.picture_corners_m()
@@ -440,13 +444,22 @@ def _validate(world: World) -> None:
 def _validate_target(world: World, size: np.ndarray) -> None:
     target = world.target
     box = target.box()
+    if target.sides == 4 and abs(target.size_m[0] - target.size_m[1]) > _TOL_M:
+        # the detector and the seeing geometry model one face shape, size[1] wide, for all four sides
+        raise WorldError(f"target.size: a target pictured on 4 sides needs a square footprint "
+                         f"(size[0] == size[1]), got {_listed(target.size_m)}")
     if np.any(np.array(box.min_m) < -_TOL_M) or np.any(np.array(box.max_m) > size + _TOL_M):
-        raise WorldError(f"target.position: target box lies outside the room {list(size)} "
-                         f"(its extent is {list(box.min_m)} .. {list(box.max_m)})")
+        raise WorldError(f"target.position: target box lies outside the room {_listed(size)} "
+                         f"(its extent is {_listed(box.min_m)} .. {_listed(box.max_m)})")
     for obstacle in world.obstacles:
         if _target_overlaps(target, obstacle):
             raise WorldError(f"target.position: target box overlaps obstacle {obstacle.name!r} "
                              "(it may rest on a surface but not cut into it)")
+
+
+def _listed(values: Iterable[float]) -> str:
+    """Metres as a message shows them: ``[6, 5, 2.5]``, not numpy reprs or float noise."""
+    return "[" + ", ".join(f"{round(float(v), 3):g}" for v in values) + "]"
 
 
 def _target_overlaps(target: Target, box: Box) -> bool:
@@ -469,7 +482,7 @@ def _validate_start(world: World, size: np.ndarray) -> None:
     x, y, r = world.start.x_m, world.start.y_m, world.robot_radius_m
     if not (r <= x <= size[0] - r and r <= y <= size[1] - r):
         raise WorldError(f"robot.start: the robot disc (radius {r} m) at ({x:.3f}, {y:.3f}) "
-                         f"is not inside the room {list(size[:2])}")
+                         f"is not inside the room {_listed(size[:2])}")
     blockers = list(world.floor_obstacles())
     if world.target.position_m[2] < FLOOR_OBSTACLE_MAX_Z_M:
         blockers.append(world.target.box())
