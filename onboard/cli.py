@@ -183,7 +183,8 @@ def run_picture(argv: list[str]) -> int:
 
 def run_worlds(argv: list[str]) -> int:
     """``worlds generate``: furnished rooms, each checked to be searchable before it is written;
-    ``worlds views``: rendered pairs with true depth of worlds, to score stereo on."""
+    ``worlds views``: rendered pairs with true depth of worlds, to score stereo on;
+    ``worlds check``: can the simulator run these worlds with this robot (exit 2 naming each that cannot)."""
     parser = argparse.ArgumentParser(prog="syt-onboard worlds", description="World files.")
     commands = parser.add_subparsers(dest="command", required=True)
     generate = commands.add_parser("generate", help="write N generated rooms DIR/room-S-K.toml (same seed, same files)")
@@ -196,8 +197,15 @@ def run_worlds(argv: list[str]) -> int:
     views.add_argument("--per-world", type=int, default=25, metavar="N")
     views.add_argument("--seed", type=int, default=0, metavar="S")
     views.add_argument("--out", type=Path, required=True, metavar="DIR")
+    check = commands.add_parser("check", help="check worlds as the simulator loads them: the format, textures and "
+                                              "pictures, and the robot fits")
+    check.add_argument("worlds", nargs="+", metavar="WORLD",
+                       help="suites (dev, test), bundled names, world files or folders of them")
+    check.add_argument("--config", type=Path, metavar="FILE.toml", help="onboard configuration: the robot's size")
     args = parser.parse_args(argv)
     _setup_logging(False)
+    if args.command == "check":
+        return _check_worlds(args)
     if args.command == "views":
         if args.per_world < 1:
             parser.error(f"--per-world: must be at least 1, got {args.per_world}")
@@ -214,6 +222,28 @@ def run_worlds(argv: list[str]) -> int:
     for path in paths:
         sys.stdout.write(f"{path}\n")
     return 0
+
+
+def _check_worlds(args: argparse.Namespace) -> int:
+    from onboard.sim.world import check_fits, load_world
+    from shared.world import WorldError, expand_suites
+
+    try:
+        config = load_config(OnboardConfig, args.config)
+        paths = expand_suites(args.worlds)
+    except (ConfigError, WorldError) as exc:
+        log.error("%s", exc)
+        return 2
+    failed = 0
+    for path in paths:
+        try:
+            check_fits(load_world(path, robot_radius_m=config.base.radius_m), config.camera.mount())
+        except WorldError as exc:
+            log.error("%s", exc if str(path) in str(exc) else f"{exc} [in {path}]")
+            failed += 1
+    if not failed:
+        sys.stdout.write(f"{len(paths)} worlds ok\n")
+    return 2 if failed else 0
 
 
 def _write_views(args: argparse.Namespace) -> int:

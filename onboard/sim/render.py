@@ -22,6 +22,7 @@ import numba
 import numpy as np
 
 from onboard.sim import textures
+from onboard.sim.world import check_fits
 from shared.world import World
 from shared.geometry import HeadMount, Intrinsics, Pose2D, RigidTransform
 
@@ -398,6 +399,7 @@ class StereoRenderer:
     """Renders rectified stereo pairs with ground-truth depth of one world."""
 
     def __init__(self, world: World, intrinsics: Intrinsics, mount: HeadMount) -> None:
+        check_fits(world, mount)
         self.world, self.intrinsics, self.mount = world, intrinsics, mount
         self._scene = _Scene(world)
         k = intrinsics

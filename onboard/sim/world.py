@@ -1,8 +1,8 @@
 """What the simulator adds to the world format (``shared.world``): it must be able to render the world.
 
 Every texture must be one of the simulator's (``onboard.sim.textures``) and every picture a built-in
-one or a readable image file next to the world file. A world that fails raises ``WorldError`` naming
-the key, as the format's own checks do.
+one or a readable image file next to the world file; and the robot's camera must fit under the
+ceiling. A world that fails raises ``WorldError`` naming the key, as the format's own checks do.
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from onboard.sim import textures
+from shared.geometry import HeadMount
 from shared.world import DEFAULT_ROBOT_RADIUS_M, World, WorldError
 from shared.world import load_world as load_world_file
 
@@ -41,3 +42,12 @@ def check_renderable(world: World) -> None:
             textures.load_picture(name, world.base_dir)
         except textures.PictureError as exc:
             raise WorldError(f"{key}: {exc}") from exc
+
+
+def check_fits(world: World, mount: HeadMount) -> None:
+    """Raise ``WorldError`` if the robot's cameras (at the tilt axis, ``mount.height_m`` up) do not fit
+    under the ceiling: the format cannot know the robot, so a low room is only refused here."""
+    height = world.room.size_m[2]
+    if mount.height_m >= height:
+        raise WorldError(f"room.size: the room is {height:g} m high, and the robot's cameras are "
+                         f"{mount.height_m:g} m above the floor: the robot does not fit")

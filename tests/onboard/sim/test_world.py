@@ -6,8 +6,12 @@ import cv2
 import numpy as np
 import pytest
 
+from onboard import cli as onboard_cli
+from onboard.config import CameraConfig
 from onboard.sim import textures
-from onboard.sim.world import load_world
+from onboard.sim.render import StereoRenderer
+from onboard.sim.world import check_fits, load_world
+from shared.geometry import HeadMount
 from shared.world import WorldError
 from shared.world import load_world as load_world_format
 
@@ -80,6 +84,26 @@ def test_a_picture_file_next_to_the_world_is_used(tmp_path):
     np.testing.assert_array_equal(loaded, picture)
 
 
+def test_a_room_lower_than_the_cameras_is_refused_by_the_simulator(tmp_path):
+    low = write(tmp_path, edit("size = [6.0, 4.0, 2.5]", "size = [6.0, 4.0, 1.0]").replace("0.75", "0.5"))
+    world = load_world(low)  # the format cannot know the robot
+    with pytest.raises(WorldError, match=r"room\.size: the room is 1 m high, and the robot's cameras are 1\.2 m"):
+        check_fits(world, HeadMount())
+    with pytest.raises(WorldError, match=r"room\.size: the room is 1 m high"):
+        StereoRenderer(world, CameraConfig().intrinsics(), HeadMount())
+    check_fits(world, HeadMount(height_m=0.9))  # a shorter robot fits
+
+
+def test_worlds_check_names_every_world_it_cannot_run_and_passes_the_rest(tmp_path, capsys, caplog):
+    good = write(tmp_path, BASE, "good.toml")
+    low = write(tmp_path, edit("size = [6.0, 4.0, 2.5]", "size = [6.0, 4.0, 1.0]").replace("0.75", "0.5"), "low.toml")
+    bad = write(tmp_path, edit('texture = "brick"', 'texture = "marble"'), "bad.toml")
+    assert onboard_cli.main(["worlds", "check", str(good), "paper-lab"]) == 0
+    assert "2 worlds ok" in capsys.readouterr().out
+    assert onboard_cli.main(["worlds", "check", str(good), str(low), str(bad)]) == 2
+    errors = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert len(errors) == 2 and "room.size" in errors[0] and str(low) in errors[0]
+    assert "room.texture: unknown texture 'marble'" in errors[1] and str(bad) in errors[1]
 
 
 def test_picture_and_texture_library():
