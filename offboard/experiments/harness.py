@@ -52,7 +52,7 @@ from offboard.experiments.world_facts import (Placement, Start, WorldFacts, load
 from offboard.search.loop import Search, SearchConfig
 from shared.arguments import floats, probability
 from shared.config import load_config
-from shared.world import expand_suites
+from shared.world import expand_suites, resolve_world
 
 if TYPE_CHECKING:
     from offboard.robot.robot_client import RobotClient
@@ -358,10 +358,18 @@ class _Workers:
                 process.kill(signal.SIGTERM)  # the worker and its agent (which stops its base on SIGTERM)
 
 
+class SweepRefused(ValueError):
+    """A sweep that cannot start: a world the simulator cannot run, a prior a world cannot have."""
+
+
 def _prepare(runs: list[Run], out: Path) -> dict[str, tuple[WorldFacts, Path, Path]]:
-    """Per world: its facts, the target's picture for the planner, the tables hints file."""
+    """Per world: its facts, the target's picture for the planner, the tables hints file. Refuses
+    (:class:`SweepRefused`) before any run starts what would fail every run of a world."""
+    names = sorted({r.world for r in runs})
+    if names:
+        _check_worlds([str(resolve_world(n)) for n in names])
     prepared = {}
-    for name in sorted({r.world for r in runs}):
+    for name in names:
         world = load_facts(name)
         pictures, hints = out / "pictures", out / "priors"
         pictures.mkdir(parents=True, exist_ok=True)
@@ -372,10 +380,24 @@ def _prepare(runs: list[Run], out: Path) -> dict[str, tuple[WorldFacts, Path, Pa
             subprocess.run([sys.executable, "-m", "onboard.cli", "picture", Path(world.target_picture).stem,
                             "--out", str(picture)], check=True, capture_output=True)
         hint_file = hints / f"{world.name}-tables.toml"
-        if world.knowledge_surfaces():
-            hint_file.write_text(tables_hints(world))
+        if any(r.world == name and r.prior == "tables" for r in runs):
+            try:
+                hint_file.write_text(tables_hints(world))
+            except ValueError as exc:
+                raise SweepRefused(f"prior tables: {exc}") from None
         prepared[name] = (world, picture, hint_file)
     return prepared
+
+
+def _check_worlds(paths: list[str]) -> None:
+    """The simulator's own check of the worlds (``syt-onboard worlds check``), in its process: this
+    side never imports the simulator."""
+    done = subprocess.run([sys.executable, "-m", "onboard.cli", "worlds", "check", *paths],
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        problems = [line.split(": ", 1)[-1] for line in done.stderr.splitlines() if " ERROR " in line]
+        raise SweepRefused("the simulator cannot run "
+                           + ("; ".join(problems) or done.stderr.strip() or f"exit {done.returncode}"))
 
 
 def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Workers) -> dict | None:
@@ -394,7 +416,7 @@ def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Worker
         return None  # interrupted: not a result, redone on resume
     if answer == "ok" and (run_dir / "summary.json").is_file():
         return make_row(run, world, json.loads((run_dir / "summary.json").read_text()), wall)
-    return make_row(run, world, None, wall, answer)
+    return make_row(run, world, None, wall, answer.removeprefix("error: "))
 
 
 def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progress], None] | None = None) -> Progress:
@@ -523,6 +545,9 @@ def main(args: argparse.Namespace) -> int:
             settings = SweepSettings(args.out, args.jobs, args.budget_s, args.run_timeout_s, args.move_threshold,
                                      args.config)
             progress = sweep(runs, settings, _show)
+        except SweepRefused as exc:
+            log.error("cannot start the sweep: %s", exc)
+            return 2
         except KeyboardInterrupt:
             sys.stderr.write("\ninterrupted: run the same command again to resume\n")
             return 130

@@ -155,6 +155,40 @@ start = [1.0, 1.0]
     assert boxes["a"].weight == pytest.approx(boxes["b"].weight)  # one table or the other, 2 m² or 1 m²
 
 
+NO_TABLES = """
+name = "{name}"
+[room]
+size = [6.0, 4.0, {height}]
+[[obstacle]]
+name = "crate"
+kind = "crate"
+min = [3.0, 0.0, 0.0]
+max = [3.5, 0.5, 0.5]
+[target]
+size = [0.23, 0.23, 0.23]
+position = [1.5, 3.5, 0.0]
+yaw_deg = -90
+[robot]
+start = [1.0, 1.0]
+"""
+
+
+@pytest.mark.parametrize(("height", "prior", "why"), [
+    (0.9, "uniform", "the simulator cannot run room.size: the room is 0.9 m high, and the robot's cameras are 1.2 m"),
+    (2.5, "tables", "prior tables: no-tables: no table, desk or surface under its target"),
+])
+def test_a_sweep_that_would_fail_every_run_is_refused_before_one_starts(tmp_path, caplog, height, prior, why):
+    world = tmp_path / "no-tables.toml"
+    world.write_text(NO_TABLES.format(name="no-tables", height=height))
+    out = tmp_path / "out"
+    argv = ("--worlds", str(world), "--costs", "3", "--priors", prior, "--starts", "1", "--targets", "1",
+            "--out", str(out))
+    assert experiment.main(_args(*argv)) == 2
+    refusal = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert refusal and refusal[0].startswith("cannot start the sweep: ") and why in refusal[0]
+    assert not (out / "results.csv").exists()
+
+
 # --- the report ------------------------------------------------------------------------------------
 
 def _synthetic_results(path: Path) -> None:
@@ -372,6 +406,7 @@ def test_a_failed_run_is_a_row_naming_why_and_the_worker_goes_on(tmp_path):
     assert experiment.main(_args(*argv)) == 1  # a run failed
     rows = {r["target"]: r for r in csv.DictReader((tmp_path / "results.csv").open())}
     assert "overlaps obstacle" in rows[impossible]["status"] and rows[impossible]["success"] == "False"
+    assert rows[impossible]["status"].startswith("error: ") and "error: error" not in rows[impossible]["status"]
     assert rows["1.7,4.65,0.75,-90"]["success"] == "True"
 
 
