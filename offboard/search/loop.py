@@ -77,7 +77,9 @@ class SearchConfig:
     # ... and it stands on a horizontal surface: only space just above one (a table, a shelf, the floor,
     # or unknown space) keeps it; False: space near a wall or the ceiling too (a target hung on a wall)
     resting_target: bool = True
-    max_actions: int = field(default=150, metadata=bounds(1, 10_000))
+    # a guard against a runaway loop, not the budget: K (planner.budget_s) ends a search long before (a look
+    # takes at least 0.7 s of it); 150 once stopped the baselines after 5 min of a 30 min budget
+    max_actions: int = field(default=3000, metadata=bounds(1, 10_000))
     # 0: the planner's t(f) takes the processing measured so far (wall clock, so decisions depend on how
     # loaded the machine is); > 0: this processing per look and none along moves, so a run repeats exactly
     planned_processing_s: float = field(default=0.0, metadata=bounds(0.0, 60.0))
