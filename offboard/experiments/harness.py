@@ -385,6 +385,9 @@ def _prepare(runs: list[Run], out: Path) -> dict[str, tuple[WorldFacts, Path, Pa
                 hint_file.write_text(tables_hints(world))
             except ValueError as exc:
                 raise SweepRefused(f"prior tables: {exc}") from None
+            if len(world.knowledge_surfaces()) == 1:
+                log.warning("prior tables in %s: one surface holds all its mass, so it tells the planner where "
+                            "the target is", world.name)
         prepared[name] = (world, picture, hint_file)
     return prepared
 

@@ -189,6 +189,17 @@ def test_a_sweep_that_would_fail_every_run_is_refused_before_one_starts(tmp_path
     assert not (out / "results.csv").exists()
 
 
+def test_a_tables_prior_with_one_table_is_flagged_as_giving_the_target_away(tmp_path, caplog):
+    world = tmp_path / "one-table.toml"
+    world.write_text(NO_TABLES.format(name="one-table", height=2.5).replace(
+        'name = "crate"\nkind = "crate"', 'name = "desk"\nkind = "desk"').replace(
+        "position = [1.5, 3.5, 0.0]", "position = [3.2, 0.2, 0.5]"))
+    run = Run("syt", str(world), (1.0, 1.0, 0.0), (3.2, 0.2, 0.5, 90.0), 3, "tables", 0)
+    prepared = experiment._prepare([run], tmp_path / "out")
+    assert [h.name for h in load_hints(prepared[str(world)][2])] == ["desk"]
+    assert any("one surface holds all its mass" in r.getMessage() for r in caplog.records if r.levelname == "WARNING")
+
+
 # --- the report ------------------------------------------------------------------------------------
 
 def _synthetic_results(path: Path) -> None:
