@@ -118,12 +118,27 @@ def test_an_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path, mo
     assert {r["key"] for r in load_results(results)} == {r.key for r in runs}
 
 
+SMALL_ROOM = """
+name = "{name}"
+[room]
+size = [6.0, 4.0, {height}]{furniture}
+[[obstacle]]
+name = "crate"
+kind = "crate"
+min = [3.0, 0.0, 0.0]
+max = [3.5, 0.5, 0.5]
+[target]
+size = [0.23, 0.23, 0.23]
+position = {position}
+yaw_deg = -90
+[robot]
+start = [1.0, 1.0]
+"""
+
+
 def test_the_tables_prior_is_the_layer_above_each_table(tmp_path):
     world_file = tmp_path / "two-tables.toml"
-    world_file.write_text("""
-name = "two-tables"
-[room]
-size = [6.0, 4.0, 2.5]
+    world_file.write_text(SMALL_ROOM.format(name="two-tables", height=2.5, position="[1.5, 3.5, 0.7]", furniture="""
 [[obstacle]]
 name = "a"
 kind = "table"
@@ -133,18 +148,7 @@ max = [2.5, 4.0, 0.7]
 name = "b"
 kind = "table"
 min = [4.0, 1.0, 0.0]
-max = [5.0, 2.0, 0.8]
-[[obstacle]]
-name = "crate"
-kind = "crate"
-min = [3.0, 0.0, 0.0]
-max = [3.5, 0.5, 0.5]
-[target]
-size = [0.23, 0.23, 0.23]
-position = [1.5, 3.5, 0.7]
-[robot]
-start = [1.0, 1.0]
-""")
+max = [5.0, 2.0, 0.8]"""))
     hints_file = tmp_path / "tables.toml"
     hints_file.write_text(tables_hints(load_facts(str(world_file))))
     boxes = {h.name: h for h in load_hints(hints_file)}
@@ -155,22 +159,6 @@ start = [1.0, 1.0]
     assert boxes["a"].weight == pytest.approx(boxes["b"].weight)  # one table or the other, 2 m² or 1 m²
 
 
-NO_TABLES = """
-name = "{name}"
-[room]
-size = [6.0, 4.0, {height}]
-[[obstacle]]
-name = "crate"
-kind = "crate"
-min = [3.0, 0.0, 0.0]
-max = [3.5, 0.5, 0.5]
-[target]
-size = [0.23, 0.23, 0.23]
-position = [1.5, 3.5, 0.0]
-yaw_deg = -90
-[robot]
-start = [1.0, 1.0]
-"""
 
 
 @pytest.mark.parametrize(("height", "prior", "why"), [
@@ -179,7 +167,7 @@ start = [1.0, 1.0]
 ])
 def test_a_sweep_that_would_fail_every_run_is_refused_before_one_starts(tmp_path, caplog, height, prior, why):
     world = tmp_path / "no-tables.toml"
-    world.write_text(NO_TABLES.format(name="no-tables", height=height))
+    world.write_text(SMALL_ROOM.format(name="no-tables", height=height, position="[1.5, 3.5, 0.0]", furniture=""))
     out = tmp_path / "out"
     argv = ("--worlds", str(world), "--costs", "3", "--priors", prior, "--starts", "1", "--targets", "1",
             "--out", str(out))
@@ -191,9 +179,8 @@ def test_a_sweep_that_would_fail_every_run_is_refused_before_one_starts(tmp_path
 
 def test_a_tables_prior_with_one_table_is_flagged_as_giving_the_target_away(tmp_path, caplog):
     world = tmp_path / "one-table.toml"
-    world.write_text(NO_TABLES.format(name="one-table", height=2.5).replace(
-        'name = "crate"\nkind = "crate"', 'name = "desk"\nkind = "desk"').replace(
-        "position = [1.5, 3.5, 0.0]", "position = [3.2, 0.2, 0.5]"))
+    world.write_text(SMALL_ROOM.format(name="one-table", height=2.5, position="[3.2, 0.2, 0.5]", furniture="").replace(
+        'name = "crate"\nkind = "crate"', 'name = "desk"\nkind = "desk"'))
     run = Run("syt", str(world), (1.0, 1.0, 0.0), (3.2, 0.2, 0.5, 90.0), 3, "tables", 0)
     prepared = experiment._prepare([run], tmp_path / "out")
     assert [h.name for h in load_hints(prepared[str(world)][2])] == ["desk"]
