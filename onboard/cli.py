@@ -225,7 +225,7 @@ def run_worlds(argv: list[str]) -> int:
 
 
 def _check_worlds(args: argparse.Namespace) -> int:
-    from onboard.sim.world import check_fits, load_world
+    from onboard.sim.world import load_world
     from shared.world import WorldError, expand_suites
 
     try:
@@ -237,9 +237,9 @@ def _check_worlds(args: argparse.Namespace) -> int:
     failed = 0
     for path in paths:
         try:
-            check_fits(load_world(path, robot_radius_m=config.base.radius_m), config.camera.mount())
+            load_world(path, robot_radius_m=config.base.radius_m, mount=config.camera.mount())
         except WorldError as exc:
-            log.error("%s", exc if str(path) in str(exc) else f"{exc} [in {path}]")
+            log.error("%s", exc)
             failed += 1
     if not failed:
         sys.stdout.write(f"{len(paths)} worlds ok\n")

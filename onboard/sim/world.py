@@ -15,11 +15,15 @@ from shared.world import DEFAULT_ROBOT_RADIUS_M, World, WorldError
 from shared.world import load_world as load_world_file
 
 
-def load_world(path_or_name: str | Path, *, robot_radius_m: float = DEFAULT_ROBOT_RADIUS_M) -> World:
-    """A bundled world by name (``"paper-lab"``) or a world file, checked for rendering too."""
+def load_world(path_or_name: str | Path, *, robot_radius_m: float = DEFAULT_ROBOT_RADIUS_M,
+               mount: HeadMount | None = None) -> World:
+    """A bundled world by name (``"paper-lab"``) or a world file, checked for rendering too, and,
+    given the robot's ``mount``, for the robot fitting in it."""
     world = load_world_file(path_or_name, robot_radius_m=robot_radius_m)
     try:
         check_renderable(world)
+        if mount is not None:
+            check_fits(world, mount)
     except WorldError as exc:
         raise WorldError(f"{exc} [in {path_or_name}]") from exc
     return world

@@ -159,8 +159,6 @@ max = [5.0, 2.0, 0.8]"""))
     assert boxes["a"].weight == pytest.approx(boxes["b"].weight)  # one table or the other, 2 m² or 1 m²
 
 
-
-
 @pytest.mark.parametrize(("height", "prior", "why"), [
     (0.9, "uniform", "the simulator cannot run room.size: the room is 0.9 m high, and the robot's cameras are 1.2 m"),
     (2.5, "tables", "prior tables: no-tables: no table, desk or surface under its target"),

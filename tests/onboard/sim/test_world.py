@@ -36,6 +36,7 @@ yaw_deg = -90
 [robot]
 start = [1.0, 1.0]
 """
+LOW = BASE.replace("size = [6.0, 4.0, 2.5]", "size = [6.0, 4.0, 1.0]").replace("0.75", "0.5")  # under the camera
 POSTER = '[[poster]]\nname = "p"\npicture = "nope"\ncenter = [3.0, 4.0, 1.5]\nsize = [0.5, 0.4]\nyaw_deg = -90\n'
 
 
@@ -85,8 +86,7 @@ def test_a_picture_file_next_to_the_world_is_used(tmp_path):
 
 
 def test_a_room_lower_than_the_cameras_is_refused_by_the_simulator(tmp_path):
-    low = write(tmp_path, edit("size = [6.0, 4.0, 2.5]", "size = [6.0, 4.0, 1.0]").replace("0.75", "0.5"))
-    world = load_world(low)  # the format cannot know the robot
+    world = load_world(write(tmp_path, LOW))  # the format cannot know the robot
     with pytest.raises(WorldError, match=r"room\.size: the room is 1 m high, and the robot's cameras are 1\.2 m"):
         check_fits(world, HeadMount())
     with pytest.raises(WorldError, match=r"room\.size: the room is 1 m high"):
@@ -96,7 +96,7 @@ def test_a_room_lower_than_the_cameras_is_refused_by_the_simulator(tmp_path):
 
 def test_worlds_check_names_every_world_it_cannot_run_and_passes_the_rest(tmp_path, capsys, caplog):
     good = write(tmp_path, BASE, "good.toml")
-    low = write(tmp_path, edit("size = [6.0, 4.0, 2.5]", "size = [6.0, 4.0, 1.0]").replace("0.75", "0.5"), "low.toml")
+    low = write(tmp_path, LOW, "low.toml")
     bad = write(tmp_path, edit('texture = "brick"', 'texture = "marble"'), "bad.toml")
     assert onboard_cli.main(["worlds", "check", str(good), "paper-lab"]) == 0
     assert "2 worlds ok" in capsys.readouterr().out
