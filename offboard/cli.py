@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -29,6 +28,15 @@ log = logging.getLogger("syt.offboard")
 
 # --- search ----------------------------------------------------------------------------------------
 
+def _prior(spec: str) -> str:
+    from offboard.search.loop import check_prior_spec
+
+    try:
+        return check_prior_spec(spec)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _add_search_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--target-picture", action="append", type=Path, metavar="PATH",
                         help="a picture of the target's textured face (repeatable; required unless --resume)")
@@ -36,17 +44,21 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
                         metavar="X,Y,Z", help="target extents in metres; the picture covers the Y × Z face")
     parser.add_argument("--target-sides", type=int, choices=(1, 4), default=1,
                         help="pictured vertical faces: 1, or 4 (seen from any direction, as the report assumes)")
-    parser.add_argument("--room", type=floats(3, "--room", positive=True), default=(9.0, 5.0, 2.5), metavar="X,Y,Z",
-                        help="the search region's size in metres, from the floor corner at the origin")
-    parser.add_argument("--cost", type=int, choices=(1, 2, 3, 4), default=3, help="cost function (report §5.2.1)")
-    parser.add_argument("--prior", action="append", default=[], metavar="KIND",
+    parser.add_argument("--room", type=floats(3, "--room", positive=True), metavar="X,Y,Z",
+                        help="the search region's size in metres, from the floor corner at the origin "
+                             "(default: the configuration's room_m, 9,5,2.5)")
+    parser.add_argument("--cost", type=int, choices=(1, 2, 3, 4),
+                        help="cost function (report §5.2.1; default: the configuration's, 3)")
+    parser.add_argument("--prior", action="append", default=[], metavar="KIND", type=_prior,
                         help="uniform | hints:FILE | surfaces | saliency | last-seen:X,Y,Z[,S] (repeatable)")
-    parser.add_argument("--budget-s", type=float, default=1800.0, metavar="SECONDS", help="robot-time budget K")
+    parser.add_argument("--budget-s", type=float, metavar="SECONDS",
+                        help="robot-time budget K (default: the configuration's, 1800)")
     parser.add_argument("--move-threshold", type=probability("--move-threshold"), default=None, metavar="P", help="Θ_move")
-    parser.add_argument("--detector", choices=("sift", "ncc", "auto"), default="sift")
+    parser.add_argument("--detector", choices=("sift", "ncc", "auto"), help="default: the configuration's, sift")
     parser.add_argument("--detectability", action="append", default=[], metavar="NAME=FILE",
                         help="a detector's measured detectability table (from calibrate-detector)")
-    parser.add_argument("--config", type=Path, metavar="FILE.toml", help="search configuration (SearchConfig)")
+    parser.add_argument("--config", type=Path, metavar="FILE.toml",
+                        help="search configuration (SearchConfig); the options above override its values")
     parser.add_argument("--out", type=Path, default=Path("search-out"), metavar="DIR")
     parser.add_argument("--resume", type=Path, metavar="DIR",
                         help="carry on the search checkpointed in DIR (its own options; transport flags override)")
@@ -109,17 +121,16 @@ def _demo(args: argparse.Namespace) -> int:
 
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    picture = out / "target.png"
-    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(picture)], check=True)
+    world = load_facts(args.world)  # the demo is the experimenter: it knows what the target looks like
+    picture = world.picture_file(out)
     started = time.monotonic()
     with onboard_agent(["--backend", "sim", "--world", args.world], out / "onboard.log") as agent:
         transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
         with transport.open() as session:
             agent.wait_ready(session, "syt")
-        world = load_facts(args.world)  # the demo is the experimenter: it knows what the target looks like
         request = SearchRequest(pictures=(picture,), target_size_m=world.target_size_m,
-                                target_sides=world.target_sides, room_m=args.room, cost=3, priors=("uniform",),
-                                out_dir=out, spawn=args.spawn)
+                                target_sides=world.target_sides, room_m=args.room or world.room_m, cost=3,
+                                priors=("uniform",), out_dir=out, spawn=args.spawn)
         summary = run_search(transport, request)
     sys.stdout.write(
         f"\nsearch {'found the target' if summary['found'] else 'ended: ' + summary['status']} in "
@@ -226,7 +237,8 @@ def _parser() -> argparse.ArgumentParser:
     search.set_defaults(func=_search)
     demo = sub.add_parser("demo", help="start a simulated robot and search with it (two processes, loopback)")
     demo.add_argument("--world", default="paper-lab")
-    demo.add_argument("--room", type=floats(3, "--room", positive=True), default=(9.0, 5.0, 2.5), metavar="X,Y,Z")
+    demo.add_argument("--room", type=floats(3, "--room", positive=True), metavar="X,Y,Z",
+                      help="the search region (default: the world's room)")
     demo.add_argument("--out", type=Path, default=Path("demo-out"), metavar="DIR")
     demo.add_argument("--spawn", action="store_true", help="also stream to a new Rerun viewer")
     demo.set_defaults(func=_demo)

@@ -151,7 +151,7 @@ class WorkerSpec:
     world_path: str
     picture: str
     prior_spec: str
-    budget_s: float
+    budget_s: float | None
     out_dir: str
     move_threshold: float | None = None  # Θ_move; None: the planner's default
     config_path: str | None = None  # SearchConfig TOML for every run; None: the defaults
@@ -248,7 +248,7 @@ def _serve(log_dir: Path) -> int:
 class SweepSettings:
     out: Path
     jobs: int = field(default_factory=lambda: os.cpu_count() or 1)
-    budget_s: float = 1800.0
+    budget_s: float | None = None  # K for every run; None: the configuration's (1800 s by default)
     run_timeout_s: float = 3600.0  # wall clock, per run
     move_threshold: float | None = None  # Θ_move for every SYT run (a sweep of its own: use its own --out)
     config_path: Path | None = None  # SearchConfig TOML for every run (likewise)
@@ -371,14 +371,9 @@ def _prepare(runs: list[Run], out: Path) -> dict[str, tuple[WorldFacts, Path, Pa
     prepared = {}
     for name in names:
         world = load_facts(name)
-        pictures, hints = out / "pictures", out / "priors"
-        pictures.mkdir(parents=True, exist_ok=True)
+        hints = out / "priors"
         hints.mkdir(parents=True, exist_ok=True)
-        picture = world.path.parent / world.target_picture
-        if not picture.is_file():
-            picture = pictures / f"{world.name}.png"
-            subprocess.run([sys.executable, "-m", "onboard.cli", "picture", Path(world.target_picture).stem,
-                            "--out", str(picture)], check=True, capture_output=True)
+        picture = world.picture_file(out / "pictures")
         hint_file = hints / f"{world.name}-tables.toml"
         if any(r.world == name and r.prior == "tables" for r in runs):
             try:
@@ -495,7 +490,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--target", type=floats(4, "--target"), action="append", metavar="X,Y,Z,YAW_DEG",
                         help="use these target placements instead (repeatable)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N", help="runs at once")
-    parser.add_argument("--budget-s", type=float, default=1800.0, metavar="SECONDS", help="robot-time budget K")
+    parser.add_argument("--budget-s", type=float, metavar="SECONDS",
+                        help="robot-time budget K (default: the --config file's, 1800)")
     parser.add_argument("--move-threshold", type=probability("--move-threshold"), metavar="P",
                         help="Θ_move for the SYT runs (default: the planner's); give each value its own --out")
     parser.add_argument("--config", type=Path, metavar="FILE.toml",

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import functools
 import math
+import subprocess
+import sys
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -248,6 +250,18 @@ class WorldFacts:
         x, y, z, _ = target
         return next((b for b in self.obstacles if abs(b.max_m[2] - z) < 1e-3
                      and b.min_m[0] <= x <= b.max_m[0] and b.min_m[1] <= y <= b.max_m[1]), None)
+
+    def picture_file(self, folder: Path) -> Path:
+        """The target's picture as a file the planner can read: the world's own image, else the
+        simulator's built-in picture of that name, written into ``folder``."""
+        own = self.path.parent / self.target_picture
+        if own.is_file():
+            return own
+        folder.mkdir(parents=True, exist_ok=True)
+        out = folder / f"{self.name}.png"
+        subprocess.run([sys.executable, "-m", "onboard.cli", "picture", Path(self.target_picture).stem,
+                        "--out", str(out)], check=True, capture_output=True)
+        return out
 
     def knowledge_surfaces(self) -> tuple[Box, ...]:
         """Where the knowledge prior says the target is: on a table, or on a surface of the kind the

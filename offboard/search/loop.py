@@ -533,11 +533,34 @@ def planning_block_factor(config: SearchConfig) -> int:
     return max(1, math.ceil(edge_m / config.resolution_m - 1e-9))
 
 
+PRIOR_KINDS = ("uniform", "hints", "last-seen", "surfaces", "saliency")
+
+
+def check_prior_spec(spec: str) -> str:
+    """``spec`` if it is a prior that :func:`build_prior` or ``dynamic_priors`` builds; else a
+    ValueError naming what is wrong with it."""
+    kind, colon, arg = spec.partition(":")
+    if kind not in PRIOR_KINDS:
+        raise ValueError(f"prior {spec!r}: unknown kind {kind!r} (kinds: {', '.join(PRIOR_KINDS)})")
+    if kind == "hints" and not arg:
+        raise ValueError(f"prior {spec!r}: hints needs a file, hints:FILE")
+    if kind == "last-seen":
+        try:
+            values = [float(v) for v in arg.split(",")]
+        except ValueError:
+            values = []
+        if len(values) not in (3, 4) or not all(math.isfinite(v) for v in values):
+            raise ValueError(f"prior {spec!r}: last-seen needs 3 or 4 numbers, last-seen:X,Y,Z[,SECONDS]")
+    elif colon and kind != "hints":
+        raise ValueError(f"prior {spec!r}: {kind} takes no argument")
+    return spec
+
+
 def build_prior(grid: VoxelGrid, specs: list[str]) -> np.ndarray:
     """Static priors from ``--prior`` specs, mixed with equal weights: ``uniform``, ``hints:FILE``,
     ``last-seen:X,Y,Z[,SECONDS]``. (``surfaces`` and ``saliency`` are dynamic; see :func:`dynamic_priors`.)"""
     weighted = []
-    for spec in specs:
+    for spec in map(check_prior_spec, specs):
         kind, _, arg = spec.partition(":")
         if kind == "uniform":
             weighted.append((1.0, priors.uniform(grid)))

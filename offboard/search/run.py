@@ -22,7 +22,7 @@ from offboard.perception.detection.detector import Detector, make_detector
 from offboard.perception.detection.target_model import TargetModel
 from offboard.search.recording import Recorder
 from offboard.robot.robot_client import RobotClient
-from offboard.search.loop import Search, SearchConfig, build_prior
+from offboard.search.loop import Search, SearchConfig, build_prior, check_prior_spec
 from offboard.perception.voxel_grid import VoxelGrid
 from shared.config import load_config
 from shared.geometry import Intrinsics
@@ -36,15 +36,18 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class SearchRequest:
+    """One search's options. ``room_m``, ``cost``, ``budget_s``, ``move_threshold`` and ``detector``
+    override the configuration file's values when given; None keeps the file's (or its default)."""
+
     pictures: tuple[Path, ...]
     target_size_m: tuple[float, float, float]
-    room_m: tuple[float, float, float]
+    room_m: tuple[float, float, float] | None = None
     target_sides: int = 1  # pictured vertical faces: 1, or 4 (then it faces every camera: no facing to track)
-    cost: int = 3
+    cost: int | None = None
     priors: tuple[str, ...] = ("uniform",)
-    budget_s: float = 1800.0
+    budget_s: float | None = None
     move_threshold: float | None = None
-    detector: str = "sift"
+    detector: str | None = None
     detectability: tuple[str, ...] = ()  # NAME=FILE
     config_path: Path | None = None
     out_dir: Path = Path("search-out")
@@ -53,13 +56,23 @@ class SearchRequest:
     record: bool = True  # write search.rrd (experiments turn it off to save time and disk)
     checkpoint: bool = True  # write checkpoint.syt after every action (for --resume)
 
+    def __post_init__(self) -> None:
+        for spec in self.priors:  # a mistyped prior must not quietly become the uniform one
+            check_prior_spec(spec)
+
 
 def search_config(request: SearchRequest) -> SearchConfig:
+    """The configuration file's search (or the defaults), with the options the request gives."""
     base = load_config(SearchConfig, request.config_path)
-    planner = dataclasses.replace(base.planner, cost_function=request.cost, budget_s=request.budget_s,
-                                  **({} if request.move_threshold is None else {"move_threshold": request.move_threshold}))
+    planner = dataclasses.replace(base.planner, **_given(cost_function=request.cost, budget_s=request.budget_s,
+                                                         move_threshold=request.move_threshold))
     facing = {"facing_sectors": 1} if request.target_sides == 4 else {}
-    return dataclasses.replace(base, room_m=request.room_m, detector=request.detector, planner=planner, **facing)
+    return dataclasses.replace(base, planner=planner, **_given(room_m=request.room_m, detector=request.detector),
+                               **facing)
+
+
+def _given(**options) -> dict:
+    return {name: value for name, value in options.items() if value is not None}
 
 
 def detectability_table(name: str, detector: Detector, files: dict[str, Path]) -> DetectabilityTable:
@@ -75,9 +88,10 @@ def detectability_table(name: str, detector: Detector, files: dict[str, Path]) -
     return DetectabilityTable.nominal(name, near_m=near, far_m=far, cost_ms=detector.cost_ms)
 
 
-def build_detectors(request: SearchRequest, model: TargetModel, intrinsics: Intrinsics) -> dict:
+def build_detectors(detector: str, request: SearchRequest, model: TargetModel, intrinsics: Intrinsics) -> dict:
+    """The detectors ``detector`` names ("auto": both), each with its detectability table."""
     files = dict(_name_file(spec) for spec in request.detectability)
-    names = ("sift", "ncc") if request.detector == "auto" else (request.detector,)
+    names = ("sift", "ncc") if detector == "auto" else (detector,)
     detectors = {}
     for name in names:
         detector = make_detector(name, model, intrinsics)
@@ -126,9 +140,9 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
             info = robot.wait_for_robot()
             intrinsics = info.intrinsics.to_intrinsics()
             cache = {} if detector_cache is None else detector_cache
-            key = (request.detector, request.pictures, request.target_size_m, request.detectability, intrinsics)
+            key = (config.detector, request.pictures, request.target_size_m, request.detectability, intrinsics)
             if key not in cache:
-                cache[key] = build_detectors(request, model, intrinsics)
+                cache[key] = build_detectors(config.detector, request, model, intrinsics)
             detectors = cache[key]
             grid = VoxelGrid(config.room_m, config.resolution_m)
             static = [p for p in request.priors if p.split(":")[0] in ("uniform", "hints", "last-seen")]

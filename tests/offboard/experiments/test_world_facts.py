@@ -129,3 +129,16 @@ def test_the_harness_accepts_the_priors_that_need_no_knowledge():
     assert parsed.priors == ("uniform", "tables", "surfaces", "saliency")
     with pytest.raises(SystemExit):
         parser.parse_args(["--priors", "psychic"])
+
+
+def test_the_planner_gets_the_worlds_own_picture_or_the_built_in_one_it_names(tmp_path):
+    import cv2
+
+    office = load_facts("office")  # picture = "target": built in
+    built = office.picture_file(tmp_path / "pictures")
+    assert built == tmp_path / "pictures" / "office.png" and cv2.imread(str(built)) is not None
+    own = tmp_path / "mine.png"
+    cv2.imwrite(str(own), np.full((64, 64, 3), 200, np.uint8))
+    room = tmp_path / "room.toml"
+    room.write_text(office.path.read_text().replace('picture = "target"', 'picture = "mine.png"'))
+    assert load_facts(str(room)).picture_file(tmp_path / "pictures") == own

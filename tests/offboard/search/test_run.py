@@ -140,3 +140,39 @@ def test_a_robot_its_map_boxes_in_squeezes_through_and_finds_the_target(tmp_path
     assert "squeezing through on its bare radius" in (out / "search.log").read_text()
     assert summary["found"] and summary["distance_m"] > 2.0, summary
     assert summary["glances"] >= summary["distance_m"] / 0.6 - 1  # every step's look toward the motion is searched
+
+
+def test_a_configuration_file_keeps_the_values_no_option_overrides(tmp_path):
+    from offboard.search.run import SearchRequest, search_config
+
+    config = tmp_path / "search.toml"
+    config.write_text('room_m = [7.0, 6.0, 2.6]\ndetector = "ncc"\n[planner]\ncost_function = 2\nbudget_s = 600.0\n')
+    request = SearchRequest(pictures=(Path("t.png"),), target_size_m=(0.23, 0.23, 0.23), config_path=config)
+    kept = search_config(request)
+    assert (kept.room_m, kept.detector, kept.planner.cost_function, kept.planner.budget_s) == \
+        ((7.0, 6.0, 2.6), "ncc", 2, 600.0)
+    given = search_config(SearchRequest(pictures=(Path("t.png"),), target_size_m=(0.23, 0.23, 0.23),
+                                        config_path=config, room_m=(9.0, 5.0, 2.5), detector="sift", cost=4,
+                                        budget_s=900.0))
+    assert (given.room_m, given.detector, given.planner.cost_function, given.planner.budget_s) == \
+        ((9.0, 5.0, 2.5), "sift", 4, 900.0)
+
+
+@pytest.mark.parametrize("spec, problem", [("surface", "unknown kind 'surface'"), ("hints", "needs a file"),
+                                           ("last-seen:1,2", "3 or 4 numbers"), ("last-seen:1,x,2", "3 or 4 numbers"),
+                                           ("uniform:3", "takes no argument")])
+def test_a_mistyped_prior_is_refused_by_name_not_searched_as_uniform(spec, problem):
+    from offboard.search.run import SearchRequest
+
+    with pytest.raises(ValueError, match=problem):
+        SearchRequest(pictures=(Path("t.png"),), target_size_m=(0.23, 0.23, 0.23), priors=("uniform", spec))
+    done = subprocess.run([sys.executable, "-m", "offboard.cli", "search", "--target-picture", "t.png",
+                           "--prior", spec], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and problem in done.stderr, done.stderr
+
+
+def test_every_prior_kind_is_accepted():
+    from offboard.search.run import SearchRequest
+
+    specs = ("uniform", "hints:h.toml", "last-seen:1,2,0.7", "last-seen:1,2,0.7,30", "surfaces", "saliency")
+    assert SearchRequest(pictures=(Path("t.png"),), target_size_m=(0.2, 0.2, 0.2), priors=specs).priors == specs
