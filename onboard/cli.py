@@ -1,4 +1,4 @@
-"""``syt-onboard``: the agent on the robot, plus ``render`` (a world preview) and ``bench``.
+"""``syt-onboard``: the agent on the robot, and the robot-side tools (``syt-onboard --help`` lists them).
 
     syt-onboard --backend sim --world paper-lab [--start X,Y,HEADING_DEG] [--target X,Y,Z,YAW_DEG]
     syt-onboard --backend hardware --config robot.toml    the serial drivers of [hardware.*] (onboard/backends.py)
@@ -6,6 +6,7 @@
     syt-onboard bench [--backend hardware [--port PORT]] --json
     syt-onboard picture NAME --out FILE.png          a built-in picture (the target's) for the planner
     syt-onboard worlds generate --count N --seed S --out DIR     checked rooms room-S-K.toml
+    syt-onboard worlds check WORLD... [--config FILE.toml]  can the simulator run them (format, pictures, ceiling)
     syt-onboard emulate --world NAME_OR_FILE         a Pioneer and a PTU-D46 on pseudo-terminals (JSON line)
     syt-onboard calibrate-stereo --images DIR --board COLSxROWS --square-mm S --out stereo.yaml
     syt-onboard probe [--port PORT] [--json]          serial ports and cameras, and what answers on them
@@ -52,7 +53,9 @@ def _load_world(args: argparse.Namespace, config: OnboardConfig):
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="syt-onboard", description="The onboard agent of a syt robot.")
+    parser = argparse.ArgumentParser(prog="syt-onboard", description="The onboard agent of a syt robot.",
+                                     epilog="usage, with the other commands:\n" + __doc__.split("\n\n", 1)[1],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--config", type=Path, metavar="FILE.toml", help="onboard configuration")
     parser.add_argument("--backend", choices=("sim", "hardware"),
                         help="device backend (default: the config's, sim); hardware reads [hardware.*]")
