@@ -63,12 +63,6 @@ class RigidTransform:
         r_inv = self.rotation.T
         return RigidTransform(r_inv, -r_inv @ self.translation)
 
-    def as_matrix(self) -> np.ndarray:
-        m = np.eye(4)
-        m[:3, :3] = self.rotation
-        m[:3, 3] = self.translation
-        return m
-
 
 @dataclass(frozen=True)
 class Pose2D:

@@ -1,7 +1,7 @@
 """The robot's physical limits and timing, shared so the planner's time model matches the agent.
 
 Defaults are those of the report's robot: a Pioneer 3-DX base and a Directed Perception PTU-D46
-pan-tilt unit carrying a Bumblebee2 stereo head (see ``shared/reference/hardware.md``). The agent
+pan-tilt unit carrying a Bumblebee2 stereo head (their manuals and datasheet). The agent
 loads them from its config, refuses commands outside them, and reports them in its ``info`` reply.
 """
 

@@ -235,12 +235,6 @@ def is_bundled_room(path: str | Path) -> bool:
     return Path(path).resolve().parent == WORLDS_DIR.resolve()
 
 
-def suite_of(path: str | Path) -> str | None:
-    """The bundled suite a world file belongs to, or None."""
-    folder = Path(path).resolve().parent
-    return folder.name if folder.parent == WORLDS_DIR.resolve() and folder.name in suite_names() else None
-
-
 def load_world(path_or_name: str | Path, *, robot_radius_m: float = DEFAULT_ROBOT_RADIUS_M) -> World:
     """Load a bundled world by name (``"paper-lab"``, ``"test/room-2000-0"``) or a world file by path."""
     path = resolve_world(path_or_name)

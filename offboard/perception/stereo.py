@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from dataclasses import dataclass
 from typing import Literal
 
@@ -210,17 +209,3 @@ def bench_pair() -> tuple[np.ndarray, np.ndarray]:
     rows, cols = slice(10, 490), slice(50, 690)
     return np.ascontiguousarray(left[rows, cols]), np.ascontiguousarray(right[rows, cols])
 
-
-def bench_stereo_ms(repeats: int) -> float:
-    """Median wall time (ms) of ``StereoMatcher().disparity`` on a 640x480 pair, after a warm-up."""
-    left, right = bench_pair()
-    matcher = StereoMatcher()
-    matcher.disparity(left, right)
-    times = []
-    for _ in range(max(1, repeats)):
-        start = time.perf_counter()
-        matcher.disparity(left, right)
-        times.append((time.perf_counter() - start) * 1000.0)
-    median = float(np.median(times))
-    log.debug("stereo 640x480: median %.1f ms over %d runs", median, len(times))
-    return median

@@ -52,12 +52,6 @@ class VoxelGrid:
     def center_of(self, index: np.ndarray) -> np.ndarray:
         return self.origin + (np.asarray(index) + 0.5) * self.resolution_m
 
-    def floor_cell_centers(self) -> tuple[np.ndarray, np.ndarray]:
-        """x and y centres of the floor cells (columns of cubes)."""
-        nx, ny, _ = self.shape
-        return (self.origin_m[0] + (np.arange(nx) + 0.5) * self.resolution_m,
-                self.origin_m[1] + (np.arange(ny) + 0.5) * self.resolution_m)
-
     def box_slices(self, min_m: np.ndarray, max_m: np.ndarray) -> tuple[slice, slice, slice]:
         """Index slices of the cubes whose centres lie inside an axis-aligned box."""
         lo = np.ceil((np.asarray(min_m) - self.origin) / self.resolution_m - 0.5).astype(int)

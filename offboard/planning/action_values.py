@@ -1,6 +1,10 @@
 """Expected value of looks not yet taken: P_Ψ(f) (eq. 1) for every action, and the covering
 probability of every candidate position (report §3.3.2-3.3.3).
 
+Paper symbols, named once: ``P_Ψ(f)`` → ``find_prob`` (the probability that action f finds the
+target, Σ p(c, τ)·b(c, f); ``b`` itself is a look's ``detection_prob``, per cube); ``Prob_Ψj`` →
+``covering_prob``.
+
 An action f is a camera position (a candidate floor position at the head's height) and a camera
 setting (world azimuth, tilt). Its expected detection probability sums, over the cubes its view
 would cover inside the expected sensed sphere, the target probability times the detector's measured
@@ -63,7 +67,7 @@ class CameraSettings:
 
 @dataclass(frozen=True)
 class ActionValues:
-    detection_prob: np.ndarray  # (P, S): expected P_Ψ(f), eq. 1
+    find_prob: np.ndarray  # (P, S): expected P_Ψ(f), eq. 1
     covering_prob: np.ndarray  # (P,): Prob_Ψj, mass inside the sensed sphere weighted by its best detectability
 
 

@@ -3,8 +3,10 @@
 Pure: it reads the belief and the occupancy map and returns a :class:`Decision`; driving the robot,
 perception and logging belong to the caller.
 
-Paper symbols, named once: ``Θ_move`` → ``move_threshold``; ``K`` → ``budget_s``; ``E(f)`` (eq. 3)
-→ ``utility``; ``Prob_Ψj`` → ``covering_prob``; ``A`` of eq. 12 → ``distance_weight``.
+Paper symbols, named once: ``Θ_move`` → ``move_threshold``; ``K`` → ``budget_s``; ``P_Ψ(f)`` (eq. 1)
+→ ``find_prob`` (see :mod:`offboard.planning.action_values`); ``E(f)`` (eq. 3) → ``utility`` of a
+look (a move's ``utility`` is its cost function's score, eq. 10-12; cost 1's is P_Ψ(f), eq. 9);
+``Prob_Ψj`` → ``covering_prob``; ``A`` of eq. 12 → ``distance_weight``.
 
 The four cost functions of §5.2.1, selected by ``cost_function``:
 
@@ -57,7 +59,7 @@ class PlannerConfig:
     move_threshold: float = field(default=0.1, metadata=bounds(0.0, 1.0))  # Θ_move of the "threshold" rule
     distance_weight: float = field(default=1.0, metadata=bounds(0.0, 1e3))  # A of eq. 12 (report: 1)
     budget_s: float = field(default=1800.0, metadata=bounds(1.0, 1e6))  # K, robot time
-    min_detection_prob: float = field(default=2e-3, metadata=bounds(0.0, 1.0))  # below: not worth a look
+    min_detection_prob: float = field(default=2e-3, metadata=bounds(0.0, 1.0))  # a look of smaller find_prob: not worth it
     grid_spacing_m: float = field(default=1.0, metadata=bounds(0.1, 10.0))  # the report's candidate positions
     max_vertices: int = field(default=40, metadata=bounds(1, 10_000))  # the grid vertices nearest the robot
     viewpoints: int = field(default=24, metadata=bounds(0, 1000))  # aimed at the belief, per decision
@@ -81,8 +83,8 @@ class Decision:
     azimuth_rad: float = 0.0  # the look (world azimuth, tilt); after a move, the first look there
     tilt_rad: float = 0.0
     position_m: tuple[float, float] | None = None  # where to move
-    detection_prob: float = 0.0  # expected P_Ψ(f), eq. 1
-    utility: float = 0.0  # the chosen cost function's value
+    find_prob: float = 0.0  # expected P_Ψ(f), eq. 1
+    utility: float = 0.0  # a look's E(f) (eq. 3); a move's cost-function score (eq. 10-12); cost 1: P_Ψ(f)
     time_s: float = 0.0  # t(f)
     status: Literal["budget", "exhausted", ""] = ""
     covering_here: float = 0.0
@@ -146,8 +148,8 @@ class SearchPlanner:
         report: the same view again would repeat what the belief already accounts for)."""
         values = self._values(pose, occupancy)
         if taken:
-            values.detection_prob[-1, sorted(taken)] = 0.0
-        here_detection = values.detection_prob[-1]
+            values.find_prob[-1, sorted(taken)] = 0.0
+        here_detection = values.find_prob[-1]
         # What looking on here can still find: no more than the looks not yet taken here would (the
         # covering also counts what the taken views left behind, which no look here will see again).
         here_covering = min(float(values.covering_prob[-1]), float(here_detection.sum()))
@@ -155,7 +157,7 @@ class SearchPlanner:
         look_t = self.time_model.look_times_s(pose.heading_rad, pan_rad, tilt_rad, self.settings.azimuth_rad,
                                               self.settings.tilt_rad)
         far_t = self._candidate_times(pose, path_lengths_m)
-        best_anywhere = max(here_detection.max(), np.where(np.isfinite(far_t), values.detection_prob[:-1], 0).max())
+        best_anywhere = max(here_detection.max(), np.where(np.isfinite(far_t), values.find_prob[:-1], 0).max())
         if best_anywhere < self.config.min_detection_prob:
             return Decision("stop", f"no reachable action finds the target with probability ≥ "
                                     f"{self.config.min_detection_prob:g}"
@@ -179,7 +181,7 @@ class SearchPlanner:
                   covering: float, pose: Pose2D) -> tuple[bool, str, np.ndarray]:
         """Whether to leave the current position and why (the ``move_rule``), and which candidates
         are worth going to: those the robot would not leave again at once."""
-        here = values.detection_prob[-1]
+        here = values.find_prob[-1]
         if self.config.move_rule == "threshold":
             worth = values.covering_prob[:-1] >= self.config.move_threshold
             move = covering < self.config.move_threshold
@@ -202,7 +204,7 @@ class SearchPlanner:
         looks (k ≤ ``visit_looks``), their expected detections summed but capped by the position's
         covering probability (overlapping views find the same mass once)."""
         reachable = np.isfinite(np.asarray(path_lengths_m, float)) & np.isfinite(far_t).all(axis=1) & self._away(pose)
-        detection, times = values.detection_prob[:-1][reachable], far_t[reachable]
+        detection, times = values.find_prob[:-1][reachable], far_t[reachable]
         travel = times.min(axis=1) - self.time_model.image_s  # driving there, the first look's slew aside
         order = np.argsort(-detection, axis=1)[:, :self.config.visit_looks]
         found = np.minimum(np.cumsum(np.take_along_axis(detection, order, axis=1), axis=1),
@@ -229,7 +231,7 @@ class SearchPlanner:
             spheres = sensed_spheres(coarse, geometry.cameras_m(which), self.bins, near, far,
                                      self.config.unknown_is_opaque, self._blocks_m[heavy])
             rows.append(evaluate(geometry, which, self.belief, spheres, self.config.behind_surface_m, heavy))
-        return ActionValues(np.vstack([r.detection_prob for r in rows]),
+        return ActionValues(np.vstack([r.find_prob for r in rows]),
                             np.concatenate([r.covering_prob for r in rows]))
 
     def _candidate_times(self, pose: Pose2D, path_lengths_m: np.ndarray) -> np.ndarray:
@@ -245,7 +247,7 @@ class SearchPlanner:
 
     def _look_here(self, values: ActionValues, look_t: np.ndarray, covering: float, why: str) -> Decision:
         """Eq. 3: the look of largest E(f) = P_Ψ(f) / t(f) from where the robot stands."""
-        detection = values.detection_prob[-1]
+        detection = values.find_prob[-1]
         utility = detection / look_t
         s = int(np.argmax(utility))
         return Decision("look", why,
@@ -257,7 +259,7 @@ class SearchPlanner:
         stereo phantom the inflation turned into a wall) must not read as a room searched through."""
         elsewhere = self._away(pose)
         reachable = np.isfinite(np.asarray(dist, float)) & elsewhere
-        best = values.detection_prob[:-1][~reachable & elsewhere].max(initial=0.0)
+        best = values.find_prob[:-1][~reachable & elsewhere].max(initial=0.0)
         if best < self.config.min_detection_prob:
             return ""
         return (f"; {int(reachable.sum())} of {int(elsewhere.sum())} positions are reachable on the map, "
@@ -267,8 +269,8 @@ class SearchPlanner:
              pose: Pose2D) -> Decision:
         """Cost 1: the largest detection probability among all reachable actions, wherever they are
         (a candidate within ``same_position_m`` is here, not a move)."""
-        far = np.where(np.isfinite(far_t) & self._away(pose)[:, None], values.detection_prob[:-1], -1.0)
-        here = values.detection_prob[-1]
+        far = np.where(np.isfinite(far_t) & self._away(pose)[:, None], values.find_prob[:-1], -1.0)
+        here = values.find_prob[-1]
         if here.max() >= far.max():
             s = int(np.argmax(here))
             return Decision("look", "eq. 9: the best action is here", self.settings.azimuth_rad[s],
@@ -285,7 +287,7 @@ class SearchPlanner:
         """Eq. 10-12: the next position, preferring those ``worth`` going to (the robot would leave
         any other at once); its first look is its best by eq. 3."""
         dist = np.asarray(path_lengths_m, float)
-        usable = np.isfinite(dist) & self._away(pose) & (values.detection_prob[:-1].max(axis=1) >= self.config.min_detection_prob)
+        usable = np.isfinite(dist) & self._away(pose) & (values.find_prob[:-1].max(axis=1) >= self.config.min_detection_prob)
         if not usable.any():
             return Decision("stop", "no reachable position left whose looks are worth taking"
                             + self._unreachable_worth(values, dist, pose), status="exhausted",
@@ -297,10 +299,10 @@ class SearchPlanner:
         score = {2: cover, 3: cover / d, 4: cover * (1.0 + self.config.distance_weight / d)}[self.config.cost_function]
         score = np.where(usable, score, -np.inf)
         j = int(np.argmax(score))
-        first = values.detection_prob[j] / far_t[j]
+        first = values.find_prob[j] / far_t[j]
         s = int(np.argmax(first))
         equation = {2: "eq. 10", 3: "eq. 11", 4: "eq. 12"}[self.config.cost_function]
         return Decision("move", f"{why}; {equation} picks ({self.positions[j][0]:g}, {self.positions[j][1]:g})",
                         self.settings.azimuth_rad[s], self.settings.tilt_rad[s], tuple(self.positions[j]),
-                        float(values.detection_prob[j, s]), float(score[j]), float(far_t[j, s]),
+                        float(values.find_prob[j, s]), float(score[j]), float(far_t[j, s]),
                         covering_here=covering, values=values, setting=s)

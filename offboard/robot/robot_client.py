@@ -19,7 +19,7 @@ import uuid
 import zenoh
 
 from shared import messages as m
-from shared.codec import decode, encode
+from shared.codec import encode
 from shared.keys import RobotKeys
 from shared.rpc import CommandError, RobotUnavailable, request
 
@@ -112,17 +112,6 @@ class RobotClient:
         bottom face, yaw°), odometry-noise seed."""
         cmd = m.SimReset(self._next_id(), m.PoseMsg(*start), tuple(target[:3]), target[3], seed)
         return self._request(self.keys.sim_reset, cmd, m.SimTruth, 30.0).pose
-
-    def latest_odometry(self, timeout_s: float = 2.0) -> m.Odometry:
-        """The next odometry publication (a steady stream; only the newest matters)."""
-        with self.session.declare_subscriber(self.keys.odometry, zenoh.handlers.RingChannel(1)) as sub:
-            deadline = time.monotonic() + timeout_s
-            while time.monotonic() < deadline:
-                sample = sub.try_recv()
-                if sample is not None:
-                    return decode(sample.payload.to_bytes(), m.Odometry)
-                time.sleep(0.01)
-        raise RobotUnavailable(f"no odometry on {self.keys.odometry} within {timeout_s:g} s")
 
     # --- internals -----------------------------------------------------------------------------------
 

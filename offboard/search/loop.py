@@ -258,7 +258,7 @@ class Search:
         self.state.planning_ms.append(planning_s * 1000.0)
         self._pending_processing_s += planning_s
         log.info("decision %d: %s — %s (P=%.3f, t=%.1f s)", len(self.state.planning_ms), decision.kind,
-                 decision.reason, decision.detection_prob, decision.time_s)
+                 decision.reason, decision.find_prob, decision.time_s)
         if self.recorder and decision.values is not None:
             self.recorder.log_plan(decision.values, self.planner.positions)
         return decision
@@ -356,11 +356,12 @@ class Search:
         s.motion_s += motion_s
         s.processing_s += processing_s
         self._pending_processing_s = 0.0
-        s.look_log.append({"action": s.actions, "expected_p": round(float(decision.detection_prob), 6),
+        s.look_log.append({"action": s.actions, "expected_p": round(float(decision.find_prob), 6),
                            "realised_p": round(float(realised), 6), "detected": obs.detection is not None,
                            "processing_s": round(processing_s, 4), "motion_s": round(motion_s, 4),
                            "x_m": round(obs.pose.x_m, 3), "y_m": round(obs.pose.y_m, 3),
-                           "heading_deg": round(math.degrees(obs.pose.heading_rad), 2), "setting": decision.setting})
+                           "heading_deg": round(math.degrees(obs.pose.heading_rad), 2), "setting": decision.setting,
+                           **{stage: round(ms, 1) for stage, ms in obs.timings_ms.items()}})
         if not self.config.planned_processing_s:
             self.planner.set_processing_s(float(np.mean([look["processing_s"] for look in s.look_log])))
 
@@ -439,7 +440,7 @@ class Search:
         best, best_value = None, -1.0
         for name, (detector, table) in self.detectors.items():
             scale = table.rate.max() / max(self.planner.table.rate.max(), 1e-9)
-            value = decision.detection_prob * scale / (decision.time_s + detector.cost_ms / 1000.0)
+            value = decision.find_prob * scale / (decision.time_s + detector.cost_ms / 1000.0)
             if value > best_value:
                 best, best_value = name, value
         return best, self.detectors[best]

@@ -165,7 +165,7 @@ class Recorder:
         grid vertices and the viewpoints aimed at the belief, in metres) coloured by covering
         probability."""
         s = self.stream
-        s.log("plan/utility", rr.BarChart(values.detection_prob[:-1].reshape(-1)))
+        s.log("plan/utility", rr.BarChart(values.find_prob[:-1].reshape(-1)))
         covering = values.covering_prob[:-1]
         s.log("maps/position_prob", rr.Points2D(positions, radii=0.1,
                                                 colors=_ramp(covering, max(float(covering.max(initial=0.0)), 1e-12), hot=True)))

@@ -2,7 +2,7 @@
 
 :class:`PioneerServerState` is the robot's firmware, pure: it consumes packets and the time and
 produces reply bytes, and drives a velocity-controlled plant (``SimBase.step_velocity``). It does
-what ARIA expects of a robot (``shared/reference/hardware.md``): it tolerates ``WMS2\\r``, echoes
+what ARIA expects of a robot (read from AriaCoda's source): it tolerates ``WMS2\\r``, echoes
 SYNC0/1/2, answers SYNC2 with name, type and subtype, sends no SIP before OPEN, takes OPEN and
 CLOSE bare or with an argument, ignores CONFIG (ARIA carries on without a config packet after 1 s;
 a half-filled one would mislead it) and HOSTBAUD (a pseudo-terminal has no baud rate), sends a SIP
@@ -34,7 +34,7 @@ from shared.strict import bounds
 log = logging.getLogger(__name__)
 
 PHYSICS_STEP_S = 0.02
-# Firmware limits of a P3-DX (hardware.md), and the firmware's defaults until the client sets its own.
+# Firmware limits of a P3-DX (its Operations Manual), and the firmware's defaults until the client sets its own.
 MAX_SPEED_MM_S = 2200
 MAX_TURN_RATE_DEG_S = 500
 _SETTLE_GAIN_PER_S = 4.0  # position and heading goals are approached exponentially at the end

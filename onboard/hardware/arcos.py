@@ -1,8 +1,8 @@
 """The ARCOS client/server protocol of a Pioneer 3 base: constants and pure encode/decode functions.
 
 No I/O here: the driver (``onboard.hardware.pioneer``) and the emulator (``onboard.emulators.pioneer``)
-both build and parse packets with these functions, and the tests hit them with the byte vectors of
-``shared/reference/hardware.md``.
+both build and parse packets with these functions, and the tests hit them with byte vectors worked
+out from the Pioneer 3 Operations Manual (its ARCOS chapter) and checked against ARIA's source.
 
 A packet is ``FA FB``, a count N (bytes after it, checksum included), the command number or packet
 type, the arguments, and a big-endian checksum. Integers inside a packet are little-endian.

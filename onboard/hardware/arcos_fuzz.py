@@ -2,15 +2,12 @@
 
 The property: feeding any stream raises nothing, parsing any packet it yields (argument or SIP)
 raises nothing but :class:`ArcosError`, and once a false header's count has passed the reader is
-back in step: good packets come out exactly. The test suite runs a few hundred cases;
-``fuzz_arcos_reader(10_000)`` is the full check.
+back in step: good packets come out exactly. ``onboard.fuzz`` runs it as a fuzz target
+(``syt-offboard fuzz --only stream``; the test suite runs a short fuzz of it).
 """
 
 from __future__ import annotations
 
-import time
-
-from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from onboard.hardware import arcos
@@ -63,17 +60,3 @@ def check_stream(stream: bytes, cuts: list[int]) -> None:
     good = arcos.parse_packet(GOOD)
     if not packets or packets[-1] != good or reader.feed(GOOD) != [good]:
         raise AssertionError(f"no resync after {stream.hex(' ')}")
-
-
-def fuzz_arcos_reader(cases: int) -> dict:
-    """Run ``cases`` generated streams; returns ``{"parser": "arcos", "cases": N, "seconds": T}``."""
-
-    @settings(max_examples=cases, deadline=None, database=None,
-              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-    @given(garbled_streams(), st.lists(st.integers(0, 2_000), max_size=8))
-    def run(stream: bytes, cuts: list[int]) -> None:
-        check_stream(stream, cuts)
-
-    start = time.perf_counter()
-    run()
-    return {"parser": "arcos", "cases": cases, "seconds": round(time.perf_counter() - start, 2)}

@@ -1,15 +1,12 @@
 """Bad bytes into the PTU-D46 reply parser (hypothesis): random and garbled streams, any chunking.
 
 The property: feeding any stream raises nothing, parsing any reply it yields raises nothing but
-:class:`PtuError`, and good lines after a line end come out exactly. The test suite runs a few
-hundred cases; ``fuzz_ptu_parser(10_000)`` is the full check.
+:class:`PtuError`, and good lines after a line end come out exactly. ``onboard.fuzz`` runs it as a fuzz target
+(``syt-offboard fuzz --only stream``; the test suite runs a short fuzz of it).
 """
 
 from __future__ import annotations
 
-import time
-
-from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from onboard.hardware.ptu_protocol import (LimitHit, PtuError, Reply, ReplyTokenizer, parse_decimal,
@@ -57,17 +54,3 @@ def check_stream(stream: bytes, cuts: list[int]) -> None:
     tail = tokenizer.feed(RESYNC)
     if tail[-3:] != RESYNC_EVENTS:
         raise AssertionError(f"no resync after {stream!r}: {tail}")
-
-
-def fuzz_ptu_parser(cases: int) -> dict:
-    """Run ``cases`` generated streams; returns ``{"parser": "ptu", "cases": N, "seconds": T}``."""
-
-    @settings(max_examples=cases, deadline=None, database=None,
-              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-    @given(garbled_streams(), st.lists(st.integers(0, 10_000), max_size=6))
-    def run(stream: bytes, cuts: list[int]) -> None:
-        check_stream(stream, cuts)
-
-    start = time.perf_counter()
-    run()
-    return {"parser": "ptu", "cases": cases, "seconds": round(time.perf_counter() - start, 2)}

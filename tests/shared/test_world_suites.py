@@ -7,7 +7,7 @@ import tomllib
 
 import pytest
 
-from shared.world import (WORLDS_DIR, WorldError, expand_suites, load_world, suite_names, suite_of, suite_worlds,
+from shared.world import (WORLDS_DIR, WorldError, expand_suites, load_world, suite_names, suite_worlds,
                           world_toml)
 
 SUITES = {"dev": (32, 1000), "test": (20, 2000)}
@@ -29,7 +29,6 @@ def test_every_suite_world_loads_one_sided_target_by_path_and_by_name(suite):
         assert (world.target.sides, world.target.picture) == (1, "target")
         assert 4.0 <= min(world.room.size_m[:2]) and max(world.room.size_m[:2]) <= 12.0
         assert load_world(f"{suite}/{path.stem}") == world
-        assert suite_of(path) == suite
 
 
 def test_each_suite_readme_says_what_it_is_for_and_the_command_that_made_it():
@@ -45,7 +44,6 @@ def test_suite_names_expand_to_their_worlds_among_other_worlds():
     assert expanded[0] == "paper-lab" and expanded[-1] == "office"
     assert list(expanded[1:-1]) == [f"dev/{p.stem}" for p in suite_worlds("dev")]
     assert len(expand_suites(["test"])) == 20
-    assert suite_of(WORLDS_DIR / "paper-lab.toml") is None
 
 
 def test_a_folder_expands_to_its_world_files_and_an_empty_one_is_refused(tmp_path):

@@ -413,4 +413,4 @@ def test_tours_let_syt_confirm_a_weak_detection():
     policy = BASELINES["exhaustive"](BaselineContext())(planner)
     everything = set(range(len(planner.settings)))
     d = _decide(policy, planner, Pose2D(3.0, 1.2, 0.0), everything - {4})
-    assert d.detection_prob > 0.3 and "look around" not in d.reason
+    assert d.find_prob > 0.3 and "look around" not in d.reason

@@ -11,7 +11,7 @@ import pytest
 import skimage.data
 
 from offboard.perception.middlebury import evaluate_motorcycle, evaluate_plain_block_matching
-from offboard.perception.stereo import (StereoConfig, StereoMatcher, bench_stereo_ms, depth_from_disparity,
+from offboard.perception.stereo import (StereoConfig, StereoMatcher, depth_from_disparity,
                              points_from_disparity)
 from shared.geometry import Intrinsics
 
@@ -149,10 +149,6 @@ def test_bad_inputs_are_refused():
         matcher.disparity(np.zeros((H, W), np.uint8), np.zeros((H, W + 1), np.uint8))
     with pytest.raises(ValueError):
         matcher.disparity(np.zeros((H, W), np.float32), np.zeros((H, W), np.float32))
-
-
-def test_bench_returns_a_positive_time():
-    assert bench_stereo_ms(1) > 0.0
 
 
 # --------------------------------------------------------------------- disparity to points

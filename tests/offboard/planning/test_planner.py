@@ -54,7 +54,7 @@ def test_each_cost_function_picks_what_its_equation_says(cost, near):
     assert d.kind == "move"
     box_center = (np.array(near.min[:2]) + np.array(near.max[:2])) / 2
     assert np.hypot(*(np.array(d.position_m) - box_center)) < 1.0, d.reason
-    assert d.detection_prob > 0.1
+    assert d.find_prob > 0.1
 
 
 def test_the_paper_lab_has_544_actions():
@@ -86,8 +86,8 @@ def test_cubes_behind_a_wall_are_worth_nothing():
     planner = _planner(3, boxes=box)
     seen = planner.decide(pose, 0.0, 0.0, 0.0, open_room, _paths(planner, pose))
     hidden = planner.decide(pose, 0.0, 0.0, 0.0, walled, _paths(planner, pose))
-    assert seen.values.detection_prob[-1].max() > 0.3
-    assert hidden.values.detection_prob[-1].max() < 0.02 and hidden.values.covering_prob[-1] < 0.05
+    assert seen.values.find_prob[-1].max() > 0.3
+    assert hidden.values.find_prob[-1].max() < 0.02 and hidden.values.covering_prob[-1] < 0.05
 
 
 def test_a_place_nothing_has_looked_at_keeps_its_probability():
@@ -163,7 +163,7 @@ def test_the_rate_rule_looks_here_while_a_look_here_beats_any_visit_elsewhere():
     planner = _planner(3, boxes=(box,))
     pose = Pose2D(2.0, 1.5, math.pi / 2)
     d = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose))
-    assert d.kind == "look" and d.detection_prob > 0.3, d.reason
+    assert d.kind == "look" and d.find_prob > 0.3, d.reason
     # the same mass far away (4.5, 2.5) is worth the drive: nothing here can see it
     far = _planner(3, boxes=(A_BOX,))
     d2 = far.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(far, pose))
@@ -194,7 +194,7 @@ def test_cost_1_moves_carry_their_setting_and_never_to_where_the_robot_stands():
     planner = _planner(1)
     d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))
     assert d.kind == "move" and 0 <= d.setting < len(planner.settings)
-    assert d.detection_prob == pytest.approx(d.values.detection_prob[:-1].max())
+    assert d.find_prob == pytest.approx(d.values.find_prob[:-1].max())
     at_vertex = Pose2D(1.0, 1.0, 0.0)  # the robot stands on a candidate: that one is "here", not a move
     d2 = planner.decide(at_vertex, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, at_vertex))
     assert d2.kind == "look" or np.hypot(d2.position_m[0] - 1.0, d2.position_m[1] - 1.0) > 0.5
@@ -237,7 +237,7 @@ def test_where_the_belief_has_gathered_occlusion_is_judged_along_the_ray_to_it()
         observed[:] = True
     pose = Pose2D(1.0, 1.95, 0.0)
     planner = _planner(3, boxes=(target,), table=DetectabilityTable.nominal())
-    best = planner.decide(pose, 0.0, 0.0, 0.0, occ, _paths(planner, pose)).values.detection_prob[-1].max()
+    best = planner.decide(pose, 0.0, 0.0, 0.0, occ, _paths(planner, pose)).values.find_prob[-1].max()
     assert best > 0.6
 
 

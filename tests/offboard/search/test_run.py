@@ -74,6 +74,11 @@ def test_the_search_finds_the_target_in_every_bundled_world(tmp_path, world, sta
     assert images == Counter(range(1, summary["actions"] + 1)) and glances == summary["glances"]
     assert summary["planning_ms_p50"] <= summary["planning_ms_p95"]
     assert summary["robot_time_s"] > 0 and summary["distance_m"] >= 0
+    for line in (out / "looks.jsonl").read_text().splitlines():  # every look's processing, by stage
+        look = json.loads(line)
+        stages = [look[stage] for stage in ("occupancy_ms", "detection_ms") if stage in look]
+        assert len(stages) == 2 and min(stages) > 0, look
+        assert sum(stages) + look.get("stereo_ms", 0.0) <= 1000 * look["processing_s"] + 1, look
 
 
 UNSEEN_WORLD = """
