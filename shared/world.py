@@ -4,8 +4,8 @@ One reader for every user of world files: the simulator renders and moves in the
 checks of textures and pictures, ``onboard.sim.world``), the experiment harness reads the truth the
 planner never sees. The planner itself never reads a world.
 
-World files are TOML (a contract other tools write; ``shared/worlds`` bundles three, and the suites
-``dev`` and ``test`` of generated rooms)::
+World files are TOML (a contract other tools write; ``shared/worlds`` bundles four, the suites
+``dev`` and ``test`` of generated rooms, and ``hand`` of rooms written by hand)::
 
     name = "paper-lab"
     [room]
@@ -189,7 +189,7 @@ def bundled_world_names() -> list[str]:
 
 
 def suite_names() -> list[str]:
-    """The bundled suites: folders of ``shared/worlds`` holding world files (``dev``, ``test``)."""
+    """The bundled suites: folders of ``shared/worlds`` holding world files (``dev``, ``hand``, ``test``)."""
     return sorted(p.name for p in WORLDS_DIR.iterdir() if p.is_dir() and any(p.glob("*.toml")))
 
 

@@ -476,7 +476,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the grid to start from (paper: the report's 160 runs); the options below override it")
     parser.add_argument("--baselines", action="store_true", help="add every baseline to the methods")
     parser.add_argument("--worlds", type=_list(str), metavar="W,..",
-                        help="bundled world names, world files, folders of world files or suites (dev, test)")
+                        help="bundled world names, world files, folders of world files or suites (dev, test, hand)")
     parser.add_argument("--costs", type=_list(int, (1, 2, 3, 4)), metavar="C,..")
     parser.add_argument("--priors", type=_list(str, PRIORS), metavar="P,..", help=", ".join(PRIORS))
     parser.add_argument("--seeds", type=_list(int), metavar="S,..", help="simulator seeds (and the random baseline's)")

@@ -1,5 +1,6 @@
-"""The shipped suites of generated rooms (shared/worlds/dev, shared/worlds/test): every world loads, by
-path and by its suite name; suite names expand for the experiment harness; each suite says what it is for."""
+"""The shipped suites (generated rooms in shared/worlds/dev and test, rooms written by hand in hand): every
+world loads, by path and by its suite name; suite names expand for the experiment harness; each suite says
+what it is for."""
 
 from __future__ import annotations
 
@@ -14,20 +15,21 @@ SUITES = {"dev": (32, 1000), "test": (20, 2000)}
 
 
 def test_the_suites_and_their_sizes():
-    assert suite_names() == ["dev", "test"]
+    assert suite_names() == ["dev", "hand", "test"]
     for name, (count, seed) in SUITES.items():
         paths = suite_worlds(name)
         assert paths == sorted(paths)
         assert sorted(p.stem for p in paths) == sorted(f"room-{seed}-{k}" for k in range(count))
 
 
-@pytest.mark.parametrize("suite", sorted(SUITES))
+@pytest.mark.parametrize("suite", [*sorted(SUITES), "hand"])
 def test_every_suite_world_loads_one_sided_target_by_path_and_by_name(suite):
+    smallest = 3.0 if suite == "hand" else 4.0  # the hand-written corridor is 3 m wide
     for path in suite_worlds(suite):
         world = load_world(path)
         assert world.name == path.stem
         assert (world.target.sides, world.target.picture) == (1, "target")
-        assert 4.0 <= min(world.room.size_m[:2]) and max(world.room.size_m[:2]) <= 12.0
+        assert smallest <= min(world.room.size_m[:2]) and max(world.room.size_m[:2]) <= 12.0
         assert load_world(f"{suite}/{path.stem}") == world
 
 
@@ -37,6 +39,8 @@ def test_each_suite_readme_says_what_it_is_for_and_the_command_that_made_it():
         assert f"syt-onboard worlds generate --count {count} --seed {seed} --out shared/worlds/{name}" in readme
     assert "never tune" in (WORLDS_DIR / "test" / "README.md").read_text()
     assert "tune on" in (WORLDS_DIR / "dev" / "README.md").read_text()
+    assert "never tune" in (WORLDS_DIR / "hand" / "README.md").read_text()
+    assert len(suite_worlds("hand")) == 9
 
 
 def test_suite_names_expand_to_their_worlds_among_other_worlds():
@@ -58,7 +62,7 @@ def test_a_folder_expands_to_its_world_files_and_an_empty_one_is_refused(tmp_pat
 
 
 def test_unknown_suites_and_suite_paths_are_refused_naming_them():
-    with pytest.raises(WorldError, match="nope: no such world suite .*dev, test"):
+    with pytest.raises(WorldError, match="nope: no such world suite .*dev, hand, test"):
         suite_worlds("nope")
     with pytest.raises(WorldError, match="nope/room-1000-0: no such world"):
         load_world("nope/room-1000-0")
