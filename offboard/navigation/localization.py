@@ -98,8 +98,6 @@ def _field_at(sigmas: float, config: MatchConfig) -> float:
 class MatchResult:
     pose: Pose2D  # best world pose of the robot
     covariance: np.ndarray  # (3, 3) over (x, y, heading)
-    inlier_fraction: float
-    num_points: int
     accepted: bool
     reason: str = ""
 
@@ -190,7 +188,7 @@ class ScanMatcher:
         """Best pose near ``prior``; the window widens to 3σ of ``prior_covariance`` when that is larger."""
         c = self.config
         if scan_xy.shape[0] < c.min_points:
-            return MatchResult(prior, np.eye(3), 0.0, int(scan_xy.shape[0]), False, "too few points")
+            return MatchResult(prior, np.eye(3), False, "too few points")
         half_xy, half_deg = self._window(prior_covariance)
         coarse = _grid(half_xy, c.coarse_xy_m, half_deg, c.coarse_theta_deg)
         scores = _search(field, scan_xy, prior, *coarse)
@@ -209,7 +207,7 @@ class ScanMatcher:
             reason = f"only {inliers:.0%} of the points lie on the map"
         elif np.any(np.abs(edges[:, 1] - edges[:, 0]) > c.max_edge_imbalance):
             reason = "the likelihood rises toward an edge of the search window"  # the true pose may lie beyond
-        return MatchResult(pose, covariance, inliers, int(scan_xy.shape[0]), not reason, reason)
+        return MatchResult(pose, covariance, not reason, reason)
 
     def _window(self, prior_covariance: np.ndarray | None) -> tuple[float, float]:
         c = self.config

@@ -219,7 +219,7 @@ class SearchPlanner:
         return np.hypot(self.positions[:, 0] - pose.x_m, self.positions[:, 1] - pose.y_m) > self.config.same_position_m
 
     def _values(self, pose: Pose2D, occupancy: OccupancyGrid) -> ActionValues:
-        near, far = self.table.range_m
+        far = self.table.range_m[1]
         here_row = np.zeros(1, np.int64)
         self._here.place(here_row, np.array([[pose.x_m, pose.y_m]]))
         parts = ((self._geometry.geometry, self._geometry.rows(self.positions)), (self._here, here_row))
@@ -228,7 +228,7 @@ class SearchPlanner:
         heavy = heavy_blocks(self.belief)
         rows = []
         for geometry, which in parts:
-            spheres = sensed_spheres(coarse, geometry.cameras_m(which), self.bins, near, far,
+            spheres = sensed_spheres(coarse, geometry.cameras_m(which), self.bins, far,
                                      self.config.unknown_is_opaque, self._blocks_m[heavy])
             rows.append(evaluate(geometry, which, self.belief, spheres, self.config.behind_surface_m, heavy))
         return ActionValues(np.vstack([r.find_prob for r in rows]),

@@ -39,15 +39,12 @@ class SensedSpheres:
     """Sensed spheres at several camera centres, sharing one binning."""
 
     bins: SphereBins
-    centers_m: np.ndarray  # (P, 3)
     radius_m: np.ndarray  # (P, el_count, az_count): first obstacle or the detector's outer range
-    inner_m: float
-    outer_m: float
     resolution_m: float  # of the map cast on: a ray stops where an occupied cube begins, up to this before its surface
     toward_m: np.ndarray  # (P, T): radius along the exact direction to each of T given points (see sensed_spheres)
 
 
-def sensed_spheres(occupancy: OccupancyGrid, centers_m: np.ndarray, bins: SphereBins, inner_m: float, outer_m: float,
+def sensed_spheres(occupancy: OccupancyGrid, centers_m: np.ndarray, bins: SphereBins, outer_m: float,
                    unknown_is_opaque: bool = False, toward_m: np.ndarray | None = None) -> SensedSpheres:
     """Ray-cast every bin's axis from every centre on the occupancy map (pass a
     :meth:`~OccupancyGrid.coarsened` map: a radius to within a block is plenty for planning), and
@@ -64,7 +61,7 @@ def sensed_spheres(occupancy: OccupancyGrid, centers_m: np.ndarray, bins: Sphere
         offsets[np.all(offsets == 0, axis=1)] = (1.0, 0.0, 0.0)  # a point at the centre: any direction will do
         toward = _cast(occupancy, np.repeat(centers, len(points), axis=0), offsets, outer_m,
                        unknown_is_opaque).reshape(len(centers), len(points))
-    return SensedSpheres(bins, centers, radius, inner_m, outer_m, occupancy.grid.resolution_m, toward)
+    return SensedSpheres(bins, radius, occupancy.grid.resolution_m, toward)
 
 
 def _cast(occupancy: OccupancyGrid, origins: np.ndarray, directions: np.ndarray, outer_m: float,
