@@ -322,11 +322,13 @@ class _Workers:
 
     def __init__(self, jobs: int, log_dir: Path):
         self.lock, self.stopping = threading.Lock(), False
-        # the runs share the cores: one numba and one OpenCV thread per worker (and its agent) when there
-        # are as many workers as cores; else one run's stereo takes every core while another plans
+        # the runs share the cores: one numba thread per worker (and its agent) when there are as many
+        # workers as cores; else one run's kernels take every core while another plans. OpenCV gets one
+        # thread whatever --jobs: its results depend on its thread count (a run of hand/library took 49
+        # looks with two, 39 with one), and a sweep's figures must not depend on --jobs
         threads = str(max(1, (os.cpu_count() or 1) // max(jobs, 1)))
         self.env = {**os.environ, "NUMBA_NUM_THREADS": threads, "OMP_NUM_THREADS": threads,
-                    "OPENCV_FOR_THREADS_NUM": threads}
+                    "OPENCV_FOR_THREADS_NUM": "1"}
         self.log_dir = log_dir
         self.idle: queue.Queue[int] = queue.Queue()
         for index in range(jobs):

@@ -414,3 +414,17 @@ def test_tours_let_syt_confirm_a_weak_detection():
     everything = set(range(len(planner.settings)))
     d = _decide(policy, planner, Pose2D(3.0, 1.2, 0.0), everything - {4})
     assert d.find_prob > 0.3 and "look around" not in d.reason
+
+
+@pytest.mark.parametrize("jobs", [1, 2, 8])
+def test_every_worker_runs_opencv_on_one_thread_whatever_the_jobs(tmp_path, jobs):
+    """OpenCV's results depend on its thread count, so a sweep's figures would depend on --jobs."""
+    import os
+    import subprocess
+    import sys
+
+    env = experiment._Workers(jobs, tmp_path).env
+    assert env["NUMBA_NUM_THREADS"] == str(max(1, (os.cpu_count() or 1) // jobs))
+    threads = subprocess.run([sys.executable, "-c", "import cv2; print(cv2.getNumThreads())"], env=env,
+                             capture_output=True, text=True, check=True).stdout.strip()
+    assert threads == "1"
