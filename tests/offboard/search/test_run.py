@@ -171,9 +171,12 @@ def test_a_mistyped_prior_is_refused_by_name_not_searched_as_uniform(spec, probl
 
     with pytest.raises(ValueError, match=problem):
         SearchRequest(pictures=(Path("t.png"),), target_size_m=(0.23, 0.23, 0.23), priors=("uniform", spec))
+
+
+def test_the_command_line_refuses_a_mistyped_prior_before_it_connects():
     done = subprocess.run([sys.executable, "-m", "offboard.cli", "search", "--target-picture", "t.png",
-                           "--prior", spec], capture_output=True, text=True, timeout=60)
-    assert done.returncode == 2 and problem in done.stderr, done.stderr
+                           "--prior", "surface"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "unknown kind 'surface'" in done.stderr, done.stderr
 
 
 def test_every_prior_kind_is_accepted():
