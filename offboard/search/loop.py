@@ -543,23 +543,25 @@ def check_prior_spec(spec: str) -> str:
     kind, colon, arg = spec.partition(":")
     if kind not in PRIOR_KINDS:
         raise ValueError(f"prior {spec!r}: unknown kind {kind!r} (kinds: {', '.join(PRIOR_KINDS)})")
-    if kind == "hints" and not arg:
-        raise ValueError(f"prior {spec!r}: hints needs a file, hints:FILE")
-    if kind == "last-seen":
+    if kind == "hints":
+        if not arg:
+            raise ValueError(f"prior {spec!r}: hints needs a file, hints:FILE")
+    elif kind == "last-seen":
         try:
             values = [float(v) for v in arg.split(",")]
         except ValueError:
             values = []
         if len(values) not in (3, 4) or not all(math.isfinite(v) for v in values):
             raise ValueError(f"prior {spec!r}: last-seen needs 3 or 4 numbers, last-seen:X,Y,Z[,SECONDS]")
-    elif colon and kind != "hints":
+    elif colon:
         raise ValueError(f"prior {spec!r}: {kind} takes no argument")
     return spec
 
 
 def build_prior(grid: VoxelGrid, specs: list[str]) -> np.ndarray:
-    """Static priors from ``--prior`` specs, mixed with equal weights: ``uniform``, ``hints:FILE``,
-    ``last-seen:X,Y,Z[,SECONDS]``. (``surfaces`` and ``saliency`` are dynamic; see :func:`dynamic_priors`.)"""
+    """The static priors among ``--prior`` specs, mixed with equal weights: ``uniform``, ``hints:FILE``,
+    ``last-seen:X,Y,Z[,SECONDS]`` (uniform if there is none). ``surfaces`` and ``saliency`` are
+    dynamic and left to ``offboard.search.run.dynamic_priors``."""
     weighted = []
     for spec in map(check_prior_spec, specs):
         kind, _, arg = spec.partition(":")

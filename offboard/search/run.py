@@ -145,8 +145,7 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
                 cache[key] = build_detectors(config.detector, request, model, intrinsics)
             detectors = cache[key]
             grid = VoxelGrid(config.room_m, config.resolution_m)
-            static = [p for p in request.priors if p.split(":")[0] in ("uniform", "hints", "last-seen")]
-            search = Search(robot, config, detectors, build_prior(grid, static),
+            search = Search(robot, config, detectors, build_prior(grid, list(request.priors)),
                             dynamic_priors(request.priors, grid, model), recorder, model.size_m[0], policy)
             if request.checkpoint or resume:
                 from offboard.search.checkpoint import attach  # (it imports this module)

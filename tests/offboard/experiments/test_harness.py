@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -419,10 +422,6 @@ def test_tours_let_syt_confirm_a_weak_detection():
 @pytest.mark.parametrize("jobs", [1, 2, 8])
 def test_every_worker_runs_opencv_on_one_thread_whatever_the_jobs(tmp_path, jobs):
     """OpenCV's results depend on its thread count, so a sweep's figures would depend on --jobs."""
-    import os
-    import subprocess
-    import sys
-
     env = experiment._Workers(jobs, tmp_path).env
     assert env["NUMBA_NUM_THREADS"] == str(max(1, (os.cpu_count() or 1) // jobs))
     threads = subprocess.run([sys.executable, "-c", "import cv2; print(cv2.getNumThreads())"], env=env,
