@@ -11,9 +11,10 @@ validates one file; :func:`calibration` bins looks by expected P; :func:`calibra
 report's section. :func:`coverage` and :func:`coverage_md` say how much of the belief the looks rule
 out: the pace any search under that prior is held to.
 
-A look also has ``x_m``, ``y_m``, ``heading_deg``: the pose the robot believed it had. In the
-harness's runs it has the simulator's truth beside them, ``true_x_m``, ``true_y_m``,
-``true_heading_deg``; :func:`localisation_md` sums up the difference.
+A look also has ``x_m``, ``y_m``, ``heading_deg``: the pose the robot believed it had, and
+``pan_deg``, ``tilt_deg``: the head's angles. In the harness's runs it has the simulator's truth
+beside them, ``true_x_m``, ``true_y_m``, ``true_heading_deg``; :func:`localisation_md` sums up the
+difference, and :mod:`~offboard.experiments.target_views` checks the detector where the target was.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ class Look:
     motion_s: float
     believed: tuple[float, float, float] | None = None  # (x_m, y_m, heading_deg) the robot believed it had
     truth: tuple[float, float, float] | None = None  # the simulator's, where the harness logged it
+    head_deg: tuple[float, float] | None = None  # (pan, tilt) the look was taken at, where logged
 
     @property
     def pose_error_m(self) -> float | None:
@@ -101,6 +103,11 @@ def parse_look(text: str, where: str = "look") -> Look:
                 raise ValueError(f"{where}: {name} = {data.get(name)!r} is not a finite float")
         values["believed"] = (float(data["x_m"]), float(data["y_m"]), float(data["heading_deg"]))
         values["truth"] = (float(data["true_x_m"]), float(data["true_y_m"]), float(data["true_heading_deg"]))
+    if "pan_deg" in data:
+        for name in ("pan_deg", "tilt_deg"):
+            if not _is(data.get(name), float):
+                raise ValueError(f"{where}: {name} = {data.get(name)!r} is not a finite float")
+        values["head_deg"] = (float(data["pan_deg"]), float(data["tilt_deg"]))
     return Look(**values)
 
 

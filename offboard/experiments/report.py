@@ -30,6 +30,7 @@ import numpy as np
 from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, calibration_md, cell, coverage,
                                               coverage_md, localisation_md, read_looks)
 from offboard.experiments.failures import failures_md, last_true_look
+from offboard.experiments.target_views import target_views, target_views_md, viewed_runs
 
 COSTS = (1, 2, 3, 4)
 PRIORS = {"uniform": "No knowledge", "tables": "Knowledge"}
@@ -663,6 +664,7 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
     found_at = [int(r["actions"]) if r["success"] else None for r in syt]
     lines += coverage_md(coverage(list(zip(looks, found_at))), source)
     lines += localisation_md(every_look, source)
+    lines += target_views_md(*target_views(viewed_runs(syt, looks)), source)
     lines += ["## SYT against the baselines", ""] + _paired_md(rows)
     lines += ["## The report's six conclusions", ""] + _conclusions_md(syt, ours)
     lines += [""] + _wall_md(rows, sweep) + ["## Plots", ""] + [f"![{p}]({p})" for p in PLOTS] + [""]

@@ -162,7 +162,7 @@ def true_floor_map(truth: Truth, criteria: SeeingCriteria = SeeingCriteria()) ->
     return FloorMap(res, occupied, blocked, np.zeros_like(occupied))
 
 
-def _segments_hit_box(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def segments_hit_box(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Do the segments p0 → p1[i] cross the box [lo, hi]? (slab test in as many dimensions as p0 has,
     vectorised over p1)"""
     d = p1 - p0
@@ -197,7 +197,7 @@ def _seeing_face(truth: Truth, floor: FloorMap, criteria: SeeingCriteria, normal
     cameras = np.column_stack([cells, np.full(len(cells), criteria.camera_height_m)])
     for point in truth.picture_points(normal):
         for box in truth.obstacles:
-            sees[sees] &= ~_segments_hit_box(point, cameras[sees], np.array(box.min_m), np.array(box.max_m))
+            sees[sees] &= ~segments_hit_box(point, cameras[sees], np.array(box.min_m), np.array(box.max_m))
     ok[ok] = sees
     return ok
 

@@ -361,6 +361,7 @@ class Search:
                            "processing_s": round(processing_s, 4), "motion_s": round(motion_s, 4),
                            "x_m": round(obs.pose.x_m, 3), "y_m": round(obs.pose.y_m, 3),
                            "heading_deg": round(math.degrees(obs.pose.heading_rad), 2), "setting": decision.setting,
+                           "pan_deg": round(obs.capture.pan_deg, 2), "tilt_deg": round(obs.capture.tilt_deg, 2),
                            **{stage: round(ms, 1) for stage, ms in obs.timings_ms.items()}})
         if not self.config.planned_processing_s:
             self.planner.set_processing_s(float(np.mean([look["processing_s"] for look in s.look_log])))

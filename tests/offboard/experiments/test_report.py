@@ -252,7 +252,7 @@ def test_a_malformed_look_is_refused_naming_the_line_and_field(tmp_path, text, n
 
 def test_the_report_sums_up_how_far_the_believed_pose_was_from_the_true_one_at_the_looks(tmp_path):
     results = tmp_path / "results.csv"
-    at = {"x_m": 1.0, "y_m": 2.0, "true_y_m": 2.0, "heading_deg": 179.0}
+    at = {"x_m": 1.0, "y_m": 2.0, "true_y_m": 2.0, "heading_deg": 179.0, "pan_deg": 0.0, "tilt_deg": 0.0}
     looks = [{**_look(0.1, 0.1), **at, "true_x_m": 1.0 + off, "true_heading_deg": -179.0 - 10 * off}
              for off in (0.0, 0.1, 0.1, 0.2, 0.5)]  # headings across ±180°: 0° to 3° apart
     _row(results, "syt", "office", "uniform", 0, 100.0, 30.0, looks + [_look(0.1, 0.1)])  # one look without truth
@@ -261,6 +261,7 @@ def test_the_report_sums_up_how_far_the_believed_pose_was_from_the_true_one_at_t
     assert ("## Localisation at the looks" in text and "5 looks" in text and "median 0.100 m, p95 0.500 m, "
             "max 0.500 m; 20% of the looks were more than 0.3 m off" in text)
     assert "The heading's error: median 1.0°, p95 3.0°, max 3.0°" in text
+    assert "## The detector where the target was" in text and "5 looks logged the simulator's pose" in text
     assert parse_look(json.dumps(_look(0.1, 0.1))).pose_error_m is None  # a search outside the harness
 
 

@@ -1,0 +1,64 @@
+"""The detector's table checked where the target was: the table's rate from the true camera of each look,
+against whether the detector fired, before and after a run's first miss in view."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import pytest
+
+from offboard.experiments.calibration import Look, parse_look
+from offboard.experiments.target_views import table_rate, target_views, target_views_md
+from offboard.experiments.world_facts import Obstacle, Truth
+from offboard.perception.detectability import DetectabilityTable
+
+TABLE = DetectabilityTable.nominal(near_m=0.5, far_m=4.0, peak=0.95, max_facing_deg=70.0)
+# a 6 × 5 m room; the target's centre at the camera's 1.2 m, its picture facing -y
+TRUTH = Truth((6.0, 5.0, 2.5), (), (3.0, 4.0, 1.2), -90.0)
+
+
+def _look(x: float, y: float, heading_deg: float, pan_deg: float = 0.0, detected: bool = False,
+          tilt_deg: float = 0.0) -> Look:
+    return Look(1, 0.1, 0.1, detected, 1.0, 1.0, (x, y, heading_deg), (x, y, heading_deg), (pan_deg, tilt_deg))
+
+
+def test_a_look_at_the_picture_gets_the_tables_rate_and_one_away_or_blocked_gets_none():
+    head_on = table_rate(TRUTH, _look(3.0, 2.0, 90.0), TABLE)  # 1.9 m in front, on the optical axis
+    assert head_on == TABLE.lookup([1.885], [0.0], [0.0])[0] > 0.8
+    oblique = table_rate(TRUTH, _look(1.5, 2.5, 0.0, pan_deg=45.0), TABLE)  # 45° off the normal, aimed at it
+    assert 0.0 < oblique < head_on
+    assert table_rate(TRUTH, _look(3.0, 2.0, -90.0), TABLE) == 0.0  # it looks away
+    assert table_rate(TRUTH, _look(3.0, 2.0, 90.0, tilt_deg=40.0), TABLE) == 0.0  # the picture below the image
+    assert table_rate(TRUTH, _look(3.0, 4.8, -90.0), TABLE) == 0.0  # behind the picture: its back
+    wall = Truth(TRUTH.room_m, (Obstacle((2.0, 3.0, 0.0), (4.0, 3.1, 2.0)),), TRUTH.target_center_m, -90.0)
+    assert table_rate(wall, _look(3.0, 2.0, 90.0), TABLE) == 0.0  # a partition in between
+    untracked = Look(1, 0.1, 0.1, False, 1.0, 1.0, (3.0, 2.0, 90.0), None, (0.0, 0.0))  # outside the harness
+    assert table_rate(TRUTH, untracked, TABLE) == 0.0
+
+
+def test_looks_are_binned_by_table_rate_and_split_at_the_runs_first_miss_in_view():
+    away = _look(3.0, 2.0, -90.0)  # not in view: counted as logged, not binned
+    near, far = _look(3.0, 2.0, 90.0), _look(3.0, 0.3, 90.0)  # rates above 0.8, and lower at 3.6 m
+    found = replace(near, detected=True)
+    runs = [(TRUTH, [away, far, found], TABLE), (TRUTH, [found], TABLE)]
+    bins, logged = target_views(runs)
+    assert logged == 4
+    top = bins[-1]
+    far_rate = table_rate(TRUTH, far, TABLE)
+    low = next(b for b in bins if b.low <= far_rate < b.high)
+    assert low.rates == (far_rate,) and low.found == (False,) and low.after_miss == (False,)
+    assert top.found == (True, True) and top.after_miss == (True, False)  # run 1's detection came after its miss
+    assert top.detection_rate() == 1.0 and top.count(True) == 1 and low.detection_rate() == 0.0
+    text = "\n".join(target_views_md(bins, logged, "two runs"))
+    assert "4 looks logged" in text and "in 3 of them" in text
+    assert "| [0.8, 1] | 2 | " in text and "| 1.00 (1) | 1.00 (1) |" in text
+    assert target_views_md(bins, 0, "an old sweep") == []  # looks from before the head's angles were logged
+
+
+def test_a_look_logs_the_heads_angles_and_a_malformed_one_is_refused():
+    line = {"action": 1, "expected_p": 0.1, "realised_p": 0.1, "detected": False, "processing_s": 1.0,
+            "motion_s": 1.0, "pan_deg": 12.5, "tilt_deg": 30.0}
+    assert parse_look(json.dumps(line)).head_deg == (12.5, 30.0)
+    with pytest.raises(ValueError, match="run/looks.jsonl:3: tilt_deg = 'up' is not a finite float"):
+        parse_look(json.dumps({**line, "tilt_deg": "up"}), "run/looks.jsonl:3")
