@@ -103,7 +103,7 @@ def parse_look(text: str, where: str = "look") -> Look:
                 raise ValueError(f"{where}: {name} = {data.get(name)!r} is not a finite float")
         values["believed"] = (float(data["x_m"]), float(data["y_m"]), float(data["heading_deg"]))
         values["truth"] = (float(data["true_x_m"]), float(data["true_y_m"]), float(data["true_heading_deg"]))
-    if "pan_deg" in data:
+    if "pan_deg" in data or "tilt_deg" in data:
         for name in ("pan_deg", "tilt_deg"):
             if not _is(data.get(name), float):
                 raise ValueError(f"{where}: {name} = {data.get(name)!r} is not a finite float")

@@ -559,7 +559,12 @@ def main(args: argparse.Namespace) -> int:
     if not (args.out / "results.csv").is_file():
         log.error("no results in %s: nothing to report", args.out)
         return 2
-    for path in write_report(args.out / "results.csv", args.out, sweep_figures):
+    try:
+        written = write_report(args.out / "results.csv", args.out, sweep_figures)
+    except (ValueError, KeyError, OSError) as exc:  # a malformed results.csv or looks.jsonl: say which, keep them
+        log.error("cannot write the report in %s: %s", args.out, exc)
+        return 2
+    for path in written:
         log.info("wrote %s", path)
     return 0 if failed == 0 else 1
 

@@ -46,7 +46,7 @@ def table_rate(truth: Truth, look: Look, table: DetectabilityTable, mount: HeadM
 def _face_rate(truth: Truth, normal: np.ndarray, camera, table: DetectabilityTable, intrinsics: Intrinsics) -> float:
     points = truth.picture_points(normal)
     uv = intrinsics.project(camera.inverse().apply(points))
-    if not (np.all(np.isfinite(uv)) and np.all((uv >= 0) & (uv <= [intrinsics.width_px, intrinsics.height_px]))):
+    if not (np.all(np.isfinite(uv)) and np.all((uv >= 0) & (uv < [intrinsics.width_px, intrinsics.height_px]))):
         return 0.0
     eye = camera.translation
     if any(segments_hit_box(eye, points, np.array(box.min_m), np.array(box.max_m)).any() for box in truth.obstacles):
@@ -104,20 +104,42 @@ def target_views(runs: list[Run]) -> tuple[list[ViewBin], int]:
     return bins, logged
 
 
+TABLED_DETECTORS = ("sift", "ncc")  # "auto" picks per search, and the looks do not say which it used
+
+
 @functools.cache
 def _truth(world: str, target: str) -> Truth:
-    return load_facts(world).truth(tuple(float(v) for v in target.split(",")))
+    """The true room and target of a row; a ValueError naming what is wrong with either."""
+    try:
+        placement = tuple(float(v) for v in target.split(","))
+    except ValueError:
+        placement = ()
+    if len(placement) != 4 or not all(math.isfinite(v) for v in placement):
+        raise ValueError(f"target {target!r} is not x,y,z,yaw")
+    return load_facts(world).truth(placement)
 
 
-def viewed_runs(rows: list[dict], looks: list[list[Look]]) -> list[Run]:
+def viewed_runs(rows: list[dict], looks: list[list[Look]]) -> tuple[list[Run], list[str]]:
     """The runs (rows of results.csv and their looks, in the same order) whose looks logged the
-    simulator's pose and the head's angles, with their true room and target and their detector's table."""
-    return [(_truth(row["world"], row["target"]), run, detector_table(row["detector"] or "sift"))
-            for row, run in zip(rows, looks) if any(look.truth and look.head_deg for look in run)]
+    simulator's pose and the head's angles, with their true room and target and their detector's
+    table; and why each other such run was left out (its world gone, its target malformed, its
+    detector without a table), naming the run."""
+    runs, left_out = [], []
+    for row, run in zip(rows, looks):
+        if not any(look.truth and look.head_deg for look in run):
+            continue
+        if row["detector"] not in TABLED_DETECTORS:
+            left_out.append(f"{row['key']}: detector {row['detector']!r} has no table of its own")
+            continue
+        try:
+            runs.append((_truth(row["world"], row["target"]), run, detector_table(row["detector"])))
+        except ValueError as exc:  # WorldError is one
+            left_out.append(f"{row['key']}: {exc}")
+    return runs, left_out
 
 
-def target_views_md(bins: list[ViewBin], logged: int, source: str) -> list[str]:
-    if not logged:
+def target_views_md(bins: list[ViewBin], logged: int, source: str, left_out: list[str] = ()) -> list[str]:
+    if not logged and not left_out:
         return []  # a sweep from before the looks logged the head's angles
     total = sum(len(b.rates) for b in bins)
     lines = ["## The detector where the target was", "",
@@ -136,4 +158,6 @@ def target_views_md(bins: list[ViewBin], logged: int, source: str) -> list[str]:
     thin = [b.label for b in bins if 0 < len(b.rates) < MIN_LOOKS]
     if thin:
         lines += ["", f"Bins with fewer than {MIN_LOOKS} looks ({', '.join(thin)}) say little."]
+    if left_out:
+        lines += ["", f"Left out ({len(left_out)} runs):", ""] + [f"- {why}" for why in left_out]
     return lines + [""]

@@ -162,6 +162,19 @@ max = [5.0, 2.0, 0.8]"""))
     assert boxes["a"].weight == pytest.approx(boxes["b"].weight)  # one table or the other, 2 m² or 1 m²
 
 
+def test_a_report_from_a_malformed_look_log_is_refused_naming_the_line_and_the_results_kept(tmp_path, caplog):
+    run = Run("syt", "office", (5.5, 1.0, 135.0), (4.3, 2.6, 0.74, -90.0), 3, "uniform", 0)
+    row = make_row(run, load_facts("office"), SUMMARY, 10.0)
+    append_row(tmp_path / "results.csv", row)
+    (tmp_path / row["run_dir"]).mkdir(parents=True)
+    (tmp_path / row["run_dir"] / LOOKS_FILE).write_text('{"action": 1, "expected_p": "high"}\n')
+    before = (tmp_path / "results.csv").read_text()
+    assert experiment.main(_args("--report-only", "--out", str(tmp_path))) == 2
+    refusal = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert refusal and refusal[0].startswith("cannot write the report in ") and f"{LOOKS_FILE}:1" in refusal[0]
+    assert (tmp_path / "results.csv").read_text() == before and not (tmp_path / "report.md").exists()
+
+
 @pytest.mark.parametrize(("height", "prior", "why"), [
     (0.9, "uniform", "the simulator cannot run room.size: the room is 0.9 m high, and the robot's cameras are 1.2 m"),
     (2.5, "tables", "prior tables: no-tables: no table, desk or surface under its target"),

@@ -9,7 +9,7 @@ from dataclasses import replace
 import pytest
 
 from offboard.experiments.calibration import Look, parse_look
-from offboard.experiments.target_views import table_rate, target_views, target_views_md
+from offboard.experiments.target_views import table_rate, target_views, target_views_md, viewed_runs
 from offboard.experiments.world_facts import Obstacle, Truth
 from offboard.perception.detectability import DetectabilityTable
 
@@ -62,3 +62,19 @@ def test_a_look_logs_the_heads_angles_and_a_malformed_one_is_refused():
     assert parse_look(json.dumps(line)).head_deg == (12.5, 30.0)
     with pytest.raises(ValueError, match="run/looks.jsonl:3: tilt_deg = 'up' is not a finite float"):
         parse_look(json.dumps({**line, "tilt_deg": "up"}), "run/looks.jsonl:3")
+    with pytest.raises(ValueError, match="pan_deg = None"):  # one angle without the other
+        parse_look(json.dumps({k: v for k, v in line.items() if k != "pan_deg"}))
+
+
+def test_a_run_whose_truth_cannot_be_had_is_left_out_by_name_and_the_rest_kept():
+    seen = [_look(3.0, 2.0, 90.0)]
+    row = {"key": "ok", "world": "office", "target": "4.3,2.6,0.74,-90", "detector": "sift"}
+    rows = [row, {**row, "key": "gone", "world": "test/room-9999-0"}, {**row, "key": "short", "target": "1,2,3"},
+            {**row, "key": "nan", "target": "nan,nan,nan,nan"}, {**row, "key": "auto", "detector": "auto"},
+            {**row, "key": "old", "world": "nowhere"}]
+    runs, left_out = viewed_runs(rows, [seen] * 5 + [[replace(seen[0], head_deg=None)]])  # "old": no angles logged
+    assert len(runs) == 1 and runs[0][0].target_center_m[:2] == (4.3, 2.6)
+    assert [why.split(":")[0] for why in left_out] == ["gone", "short", "nan", "auto"]
+    assert "room-9999-0" in left_out[0] and "'1,2,3' is not x,y,z,yaw" in left_out[1] and "'auto'" in left_out[3]
+    text = "\n".join(target_views_md(*target_views(runs), "six runs", left_out))
+    assert "Left out (4 runs):" in text and "- nan: target 'nan,nan,nan,nan' is not x,y,z,yaw" in text
