@@ -66,6 +66,7 @@ class ViewBin:
     rates: tuple[float, ...]  # table rates of its looks
     found: tuple[bool, ...]  # whether the detector fired on each
     after_miss: tuple[bool, ...]  # whether each came after its run's first miss in view
+    run: tuple[int, ...]  # which run each came from: a run's looks are much alike, so count runs too
 
     def detection_rate(self, after_miss: bool | None = None) -> float | None:
         """The share of its looks (all, or only those before / after a miss in view) that detected."""
@@ -74,6 +75,10 @@ class ViewBin:
 
     def count(self, after_miss: bool) -> int:
         return sum(a == after_miss for a in self.after_miss)
+
+    @property
+    def runs(self) -> int:
+        return len(set(self.run))
 
     @property
     def label(self) -> str:
@@ -86,21 +91,20 @@ Run = tuple[Truth, list[Look], DetectabilityTable]  # the true room and target, 
 def target_views(runs: list[Run]) -> tuple[list[ViewBin], int]:
     """The looks of every run with the target in view, binned by table rate; and how many looks had
     the simulator's pose and the head's angles logged (the population)."""
-    samples: list[tuple[float, bool, bool]] = []
+    samples: list[tuple[float, bool, bool, int]] = []
     logged = 0
-    for truth, looks, table in runs:
+    for number, (truth, looks, table) in enumerate(runs):
         missed = False
         for look in looks:
             logged += look.truth is not None and look.head_deg is not None
             rate = table_rate(truth, look, table)
             if rate >= RATE_EDGES[0]:
-                samples.append((rate, look.detected, missed))
+                samples.append((rate, look.detected, missed, number))
                 missed = missed or not look.detected
     bins = []
     for low, high in zip(RATE_EDGES, RATE_EDGES[1:]):
         inside = [s for s in samples if low <= s[0] < high or s[0] == high == RATE_EDGES[-1]]
-        bins.append(ViewBin(low, high, tuple(s[0] for s in inside), tuple(s[1] for s in inside),
-                            tuple(s[2] for s in inside)))
+        bins.append(ViewBin(low, high, *(tuple(s[k] for s in inside) for k in range(4))))
     return bins, logged
 
 
@@ -148,11 +152,11 @@ def target_views_md(bins: list[ViewBin], logged: int, source: str, left_out: lis
              "the picture all in the image, nothing in the way). Binned by that table rate: the share of them on which "
              "the detector fired, for all of them and split at each run's first miss in view. Eq. 4 treats looks as "
              "independent draws: if they are, a look after a miss finds the target as often as one before.", "",
-             "| Table rate | Looks | Mean table rate | Detected | Before a miss (looks) | After a miss (looks) |",
+             "| Table rate | Looks (runs) | Mean table rate | Detected | Before a miss (looks) | After a miss (looks) |",
              "|---|---|---|---|---|---|"]
     for b in bins:
         mean = sum(b.rates) / len(b.rates) if b.rates else None
-        lines.append(f"| {b.label} | {len(b.rates)} | "
+        lines.append(f"| {b.label} | {len(b.rates)} ({b.runs}) | "
                      f"{cell(mean)} | {cell(b.detection_rate())} | {cell(b.detection_rate(False))} ({b.count(False)}) | "
                      f"{cell(b.detection_rate(True))} ({b.count(True)}) |")
     thin = [b.label for b in bins if 0 < len(b.rates) < MIN_LOOKS]

@@ -50,9 +50,10 @@ def test_looks_are_binned_by_table_rate_and_split_at_the_runs_first_miss_in_view
     assert low.rates == (far_rate,) and low.found == (False,) and low.after_miss == (False,)
     assert top.found == (True, True) and top.after_miss == (True, False)  # run 1's detection came after its miss
     assert top.detection_rate() == 1.0 and top.count(True) == 1 and low.detection_rate() == 0.0
+    assert top.run == (0, 1) and top.runs == 2 and low.runs == 1
     text = "\n".join(target_views_md(bins, logged, "two runs"))
     assert "4 looks logged" in text and "in 3 of them" in text
-    assert "| [0.8, 1] | 2 | " in text and "| 1.00 (1) | 1.00 (1) |" in text
+    assert "| [0.8, 1] | 2 (2) | " in text and "| 1.00 (1) | 1.00 (1) |" in text
     assert target_views_md(bins, 0, "an old sweep") == []  # looks from before the head's angles were logged
 
 
