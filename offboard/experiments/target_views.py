@@ -27,85 +27,123 @@ from offboard.perception.detectability import DetectabilityTable, facing_angle_d
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 
 RATE_EDGES = (0.05, 0.2, 0.4, 0.6, 0.8, 1.0)  # a look below the first edge does not count as in view
+DISTANCE_EDGES_M = (0.0, 2.0, 4.0, math.inf)
+OFF_NORMAL_EDGES_DEG = (0.0, 30.0, 60.0, 90.0)
 SIM_CAMERA = Intrinsics.from_fov(640, 480, 66.0)  # the simulator's default camera, which the harness runs
 SIM_MOUNT = HeadMount()  # ... on the default head
 
 
-def table_rate(truth: Truth, look: Look, table: DetectabilityTable, mount: HeadMount = SIM_MOUNT,
-               intrinsics: Intrinsics = SIM_CAMERA) -> float:
-    """The table's rate for the target's best pictured face from the look's true camera; 0 out of view
-    or for a look without the simulator's pose and the head's angles."""
+@dataclass(frozen=True)
+class TargetView:
+    """How a look's true camera saw the target's picture, when it was in view."""
+
+    rate: float  # the table's, at the three below
+    distance_m: float
+    off_axis_deg: float
+    off_normal_deg: float
+
+
+def target_view(truth: Truth, look: Look, table: DetectabilityTable, mount: HeadMount = SIM_MOUNT,
+                intrinsics: Intrinsics = SIM_CAMERA) -> TargetView | None:
+    """The view of the target's best pictured face (by table rate) from the look's true camera; None
+    if no face is all in the image and in plain sight, or for a look without the simulator's pose and
+    the head's angles. A face seen from behind is in view, at rate 0."""
     if look.truth is None or look.head_deg is None:
-        return 0.0
+        return None
     x, y, heading = look.truth
     camera = mount.camera_in_world(Pose2D(x, y, math.radians(heading)), *np.radians(look.head_deg))
-    return max((_face_rate(truth, normal, camera, table, intrinsics) for normal in truth.face_normals()),
-               default=0.0)
+    views = [v for normal in truth.face_normals() if (v := _face_view(truth, normal, camera, table, intrinsics))]
+    return max(views, key=lambda v: v.rate, default=None)
 
 
-def _face_rate(truth: Truth, normal: np.ndarray, camera, table: DetectabilityTable, intrinsics: Intrinsics) -> float:
+def _face_view(truth: Truth, normal: np.ndarray, camera, table: DetectabilityTable,
+               intrinsics: Intrinsics) -> TargetView | None:
     points = truth.picture_points(normal)
     uv = intrinsics.project(camera.inverse().apply(points))
     if not (np.all(np.isfinite(uv)) and np.all((uv >= 0) & (uv < [intrinsics.width_px, intrinsics.height_px]))):
-        return 0.0
+        return None
     eye = camera.translation
     if any(segments_hit_box(eye, points, np.array(box.min_m), np.array(box.max_m)).any() for box in truth.obstacles):
-        return 0.0
+        return None
     ray = points[0] - eye
     distance = float(np.linalg.norm(ray))
     off_axis = math.degrees(math.acos(np.clip(ray @ camera.rotation[:, 2] / distance, -1.0, 1.0)))
-    facing = facing_angle_deg(math.atan2(ray[1], ray[0]), math.atan2(normal[1], normal[0]),
-                              math.asin(np.clip(ray[2] / distance, -1.0, 1.0)))
-    return float(table.lookup(np.array([distance]), np.array([off_axis]), np.array([facing]))[0])
+    facing = float(facing_angle_deg(math.atan2(ray[1], ray[0]), math.atan2(normal[1], normal[0]),
+                                    math.asin(np.clip(ray[2] / distance, -1.0, 1.0))))
+    rate = float(table.lookup(np.array([distance]), np.array([off_axis]), np.array([facing]))[0])
+    return TargetView(rate, distance, off_axis, facing)
 
 
 @dataclass(frozen=True)
-class ViewBin:
-    low: float
-    high: float
-    rates: tuple[float, ...]  # table rates of its looks
-    found: tuple[bool, ...]  # whether the detector fired on each
-    after_miss: tuple[bool, ...]  # whether each came after its run's first miss in view
-    run: tuple[int, ...]  # which run each came from: a run's looks are much alike, so count runs too
+class ViewedLook:
+    view: TargetView
+    detected: bool
+    after_miss: bool  # it came after its run's first miss in view
+    run: int  # which run it came from: a run's looks are much alike, so count runs too
+
+
+@dataclass(frozen=True)
+class ViewGroup:
+    label: str
+    looks: tuple[ViewedLook, ...]
 
     def detection_rate(self, after_miss: bool | None = None) -> float | None:
         """The share of its looks (all, or only those before / after a miss in view) that detected."""
-        hits = [f for f, a in zip(self.found, self.after_miss) if after_miss is None or a == after_miss]
+        hits = [v.detected for v in self.looks if after_miss is None or v.after_miss == after_miss]
         return sum(hits) / len(hits) if hits else None
 
     def count(self, after_miss: bool) -> int:
-        return sum(a == after_miss for a in self.after_miss)
+        return sum(v.after_miss == after_miss for v in self.looks)
 
     @property
     def runs(self) -> int:
-        return len(set(self.run))
+        return len({v.run for v in self.looks})
 
     @property
-    def label(self) -> str:
-        return f"[{self.low:g}, {self.high:g}{']' if self.high == RATE_EDGES[-1] else ')'}"
+    def mean_rate(self) -> float | None:
+        return sum(v.view.rate for v in self.looks) / len(self.looks) if self.looks else None
 
 
 Run = tuple[Truth, list[Look], DetectabilityTable]  # the true room and target, the looks, the run's detector's table
 
 
-def target_views(runs: list[Run]) -> tuple[list[ViewBin], int]:
-    """The looks of every run with the target in view, binned by table rate; and how many looks had
-    the simulator's pose and the head's angles logged (the population)."""
-    samples: list[tuple[float, bool, bool, int]] = []
+def target_views(runs: list[Run]) -> tuple[list[ViewedLook], int]:
+    """The looks of every run with the target in view (its table rate at least the first of
+    :data:`RATE_EDGES`); and how many looks had the simulator's pose and the head's angles logged."""
+    viewed: list[ViewedLook] = []
     logged = 0
     for number, (truth, looks, table) in enumerate(runs):
         missed = False
         for look in looks:
             logged += look.truth is not None and look.head_deg is not None
-            rate = table_rate(truth, look, table)
-            if rate >= RATE_EDGES[0]:
-                samples.append((rate, look.detected, missed, number))
+            view = target_view(truth, look, table)
+            if view is not None and view.rate >= RATE_EDGES[0]:
+                viewed.append(ViewedLook(view, look.detected, missed, number))
                 missed = missed or not look.detected
-    bins = []
-    for low, high in zip(RATE_EDGES, RATE_EDGES[1:]):
-        inside = [s for s in samples if low <= s[0] < high or s[0] == high == RATE_EDGES[-1]]
-        bins.append(ViewBin(low, high, *(tuple(s[k] for s in inside) for k in range(4))))
-    return bins, logged
+    return viewed, logged
+
+
+def _groups(looks: list[ViewedLook], value, edges: tuple[float, ...], unit: str = "") -> list[ViewGroup]:
+    """``looks`` grouped by ``value(view)`` between ``edges`` (the last group closed above)."""
+    groups = []
+    for low, high in zip(edges, edges[1:]):
+        last = high == edges[-1]
+        inside = tuple(v for v in looks if low <= value(v.view) < high or (last and value(v.view) == high))
+        label = f"≥ {low:g}{unit}" if math.isinf(high) else f"[{low:g}, {high:g}{']' if last else ')'}{unit}"
+        groups.append(ViewGroup(label, inside))
+    return groups
+
+
+def by_rate(looks: list[ViewedLook]) -> list[ViewGroup]:
+    return _groups(looks, lambda v: v.rate, RATE_EDGES)
+
+
+def by_distance(looks: list[ViewedLook]) -> list[ViewGroup]:
+    return _groups(looks, lambda v: v.distance_m, DISTANCE_EDGES_M, " m")
+
+
+def by_off_normal(looks: list[ViewedLook]) -> list[ViewGroup]:
+    return _groups(looks, lambda v: v.off_normal_deg, OFF_NORMAL_EDGES_DEG, "°")
 
 
 TABLED_DETECTORS = ("sift", "ncc")  # "auto" picks per search, and the looks do not say which it used
@@ -142,26 +180,29 @@ def viewed_runs(rows: list[dict], looks: list[list[Look]]) -> tuple[list[Run], l
     return runs, left_out
 
 
-def target_views_md(bins: list[ViewBin], logged: int, source: str, left_out: list[str] = ()) -> list[str]:
+def target_views_md(looks: list[ViewedLook], logged: int, source: str, left_out: list[str] = ()) -> list[str]:
     if not logged and not left_out:
         return []  # a sweep from before the looks logged the head's angles
-    total = sum(len(b.rates) for b in bins)
     lines = ["## The detector where the target was", "",
-             f"Over {source}: {logged} looks logged the simulator's pose and the head's angles; in {total} of them the "
+             f"Over {source}: {logged} looks logged the simulator's pose and the head's angles; in {len(looks)} of them the "
              f"target's picture was in view (the run's detector's table gives at least {RATE_EDGES[0]:g} from the true camera, "
              "the picture all in the image, nothing in the way). Binned by that table rate: the share of them on which "
              "the detector fired, for all of them and split at each run's first miss in view. Eq. 4 treats looks as "
              "independent draws: if they are, a look after a miss finds the target as often as one before.", "",
              "| Table rate | Looks (runs) | Mean table rate | Detected | Before a miss (looks) | After a miss (looks) |",
              "|---|---|---|---|---|---|"]
-    for b in bins:
-        mean = sum(b.rates) / len(b.rates) if b.rates else None
-        lines.append(f"| {b.label} | {len(b.rates)} ({b.runs}) | "
-                     f"{cell(mean)} | {cell(b.detection_rate())} | {cell(b.detection_rate(False))} ({b.count(False)}) | "
-                     f"{cell(b.detection_rate(True))} ({b.count(True)}) |")
-    thin = [b.label for b in bins if 0 < len(b.rates) < MIN_LOOKS]
+    rates = by_rate(looks)
+    for g in rates:
+        lines.append(f"| {g.label} | {len(g.looks)} ({g.runs}) | {cell(g.mean_rate)} | {cell(g.detection_rate())} | "
+                     f"{cell(g.detection_rate(False))} ({g.count(False)}) | {cell(g.detection_rate(True))} ({g.count(True)}) |")
+    thin = [g.label for g in rates if 0 < len(g.looks) < MIN_LOOKS]
     if thin:
         lines += ["", f"Bins with fewer than {MIN_LOOKS} looks ({', '.join(thin)}) say little."]
+    lines += ["", "The same looks by the picture's distance and by the camera's angle off the picture's normal "
+              "(where a table measured elsewhere is most likely to be wrong):", "",
+              "| View | Looks (runs) | Mean table rate | Detected |", "|---|---|---|---|"]
+    for g in by_distance(looks) + by_off_normal(looks):
+        lines.append(f"| {g.label} | {len(g.looks)} ({g.runs}) | {cell(g.mean_rate)} | {cell(g.detection_rate())} |")
     if left_out:
         lines += ["", f"Left out ({len(left_out)} runs):", ""] + [f"- {why}" for why in left_out]
     return lines + [""]

@@ -1,5 +1,5 @@
 """The detector's table checked where the target was: the table's rate from the true camera of each look,
-against whether the detector fired, before and after a run's first miss in view."""
+against whether the detector fired, before and after a run's first miss in view, and by distance and angle."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ from dataclasses import replace
 import pytest
 
 from offboard.experiments.calibration import Look, parse_look
-from offboard.experiments.target_views import table_rate, target_views, target_views_md, viewed_runs
+from offboard.experiments.target_views import (by_distance, by_off_normal, by_rate, target_view, target_views,
+                                               target_views_md, viewed_runs)
 from offboard.experiments.world_facts import Obstacle, Truth
 from offboard.perception.detectability import DetectabilityTable
 
@@ -24,37 +25,39 @@ def _look(x: float, y: float, heading_deg: float, pan_deg: float = 0.0, detected
 
 
 def test_a_look_at_the_picture_gets_the_tables_rate_and_one_away_or_blocked_gets_none():
-    head_on = table_rate(TRUTH, _look(3.0, 2.0, 90.0), TABLE)  # 1.9 m in front, on the optical axis
-    assert head_on == TABLE.lookup([1.885], [0.0], [0.0])[0] > 0.8
-    oblique = table_rate(TRUTH, _look(1.5, 2.5, 0.0, pan_deg=45.0), TABLE)  # 45° off the normal, aimed at it
-    assert 0.0 < oblique < head_on
-    assert table_rate(TRUTH, _look(3.0, 2.0, -90.0), TABLE) == 0.0  # it looks away
-    assert table_rate(TRUTH, _look(3.0, 2.0, 90.0, tilt_deg=40.0), TABLE) == 0.0  # the picture below the image
-    assert table_rate(TRUTH, _look(3.0, 4.8, -90.0), TABLE) == 0.0  # behind the picture: its back
+    head_on = target_view(TRUTH, _look(3.0, 2.0, 90.0), TABLE)  # 1.9 m in front, on the optical axis
+    assert head_on.rate == TABLE.lookup([1.885], [0.0], [0.0])[0] > 0.8
+    assert head_on.distance_m == pytest.approx(1.885, abs=0.01) and head_on.off_normal_deg < 2.0
+    oblique = target_view(TRUTH, _look(1.586, 2.471, 0.0, pan_deg=45.0), TABLE)  # 2 m away, 45° off the normal
+    assert 0.0 < oblique.rate < head_on.rate and oblique.off_normal_deg == pytest.approx(45.0, abs=2.5)
+    assert target_view(TRUTH, _look(3.0, 2.0, -90.0), TABLE) is None  # it looks away
+    assert target_view(TRUTH, _look(3.0, 2.0, 90.0, tilt_deg=40.0), TABLE) is None  # the picture below the image
+    assert target_view(TRUTH, _look(3.0, 4.8, -90.0), TABLE).rate == 0.0  # behind the picture: its back
     wall = Truth(TRUTH.room_m, (Obstacle((2.0, 3.0, 0.0), (4.0, 3.1, 2.0)),), TRUTH.target_center_m, -90.0)
-    assert table_rate(wall, _look(3.0, 2.0, 90.0), TABLE) == 0.0  # a partition in between
+    assert target_view(wall, _look(3.0, 2.0, 90.0), TABLE) is None  # a partition in between
     untracked = Look(1, 0.1, 0.1, False, 1.0, 1.0, (3.0, 2.0, 90.0), None, (0.0, 0.0))  # outside the harness
-    assert table_rate(TRUTH, untracked, TABLE) == 0.0
+    assert target_view(TRUTH, untracked, TABLE) is None
 
 
 def test_looks_are_binned_by_table_rate_and_split_at_the_runs_first_miss_in_view():
     away = _look(3.0, 2.0, -90.0)  # not in view: counted as logged, not binned
     near, far = _look(3.0, 2.0, 90.0), _look(3.0, 0.3, 90.0)  # rates above 0.8, and lower at 3.6 m
     found = replace(near, detected=True)
-    runs = [(TRUTH, [away, far, found], TABLE), (TRUTH, [found], TABLE)]
-    bins, logged = target_views(runs)
-    assert logged == 4
-    top = bins[-1]
-    far_rate = table_rate(TRUTH, far, TABLE)
-    low = next(b for b in bins if b.low <= far_rate < b.high)
-    assert low.rates == (far_rate,) and low.found == (False,) and low.after_miss == (False,)
-    assert top.found == (True, True) and top.after_miss == (True, False)  # run 1's detection came after its miss
-    assert top.detection_rate() == 1.0 and top.count(True) == 1 and low.detection_rate() == 0.0
-    assert top.run == (0, 1) and top.runs == 2 and low.runs == 1
-    text = "\n".join(target_views_md(bins, logged, "two runs"))
+    viewed, logged = target_views([(TRUTH, [away, far, found], TABLE), (TRUTH, [found], TABLE)])
+    assert logged == 4 and len(viewed) == 3
+    rates = by_rate(viewed)
+    top, far_rate = rates[-1], target_view(TRUTH, far, TABLE).rate
+    low = next(g for g in rates if far_rate in [v.view.rate for v in g.looks])
+    assert [(v.detected, v.after_miss) for v in low.looks] == [(False, False)]
+    assert [(v.detected, v.after_miss) for v in top.looks] == [(True, True), (True, False)]  # run 0's came after its miss
+    assert top.detection_rate() == 1.0 and top.count(True) == 1 and top.runs == 2 and low.detection_rate() == 0.0
+    assert [len(g.looks) for g in by_distance(viewed)] == [2, 1, 0]  # under 2 m, 2-4 m, 4 m or more
+    assert [len(g.looks) for g in by_off_normal(viewed)] == [3, 0, 0]  # all nearly head-on
+    text = "\n".join(target_views_md(viewed, logged, "two runs"))
     assert "4 looks logged" in text and "in 3 of them" in text
     assert "| [0.8, 1] | 2 (2) | " in text and "| 1.00 (1) | 1.00 (1) |" in text
-    assert target_views_md(bins, 0, "an old sweep") == []  # looks from before the head's angles were logged
+    assert "| [2, 4) m | 1 (1) | " in text and "| ≥ 4 m | 0 (0) | — | — |" in text and "| [60, 90]° | 0 (0) |" in text
+    assert target_views_md(viewed, 0, "an old sweep") == []  # looks from before the head's angles were logged
 
 
 def test_a_look_logs_the_heads_angles_and_a_malformed_one_is_refused():
