@@ -188,6 +188,9 @@ def run_worlds(argv: list[str]) -> int:
     """``worlds generate``: furnished rooms, each checked to be searchable before it is written;
     ``worlds views``: rendered pairs with true depth of worlds, to score stereo on;
     ``worlds check``: can the simulator run these worlds with this robot (exit 2 naming each that cannot)."""
+    from shared.world import suite_names
+
+    suites = ", ".join(suite_names())
     parser = argparse.ArgumentParser(prog="syt-onboard worlds", description="World files.")
     commands = parser.add_subparsers(dest="command", required=True)
     generate = commands.add_parser("generate", help="write N generated rooms DIR/room-S-K.toml (same seed, same files)")
@@ -196,14 +199,14 @@ def run_worlds(argv: list[str]) -> int:
     generate.add_argument("--out", type=Path, required=True, metavar="DIR")
     views = commands.add_parser("views", help="render stereo pairs with true depth of worlds, to score stereo on")
     views.add_argument("--worlds", required=True, metavar="NAMES",
-                       help="comma-separated suites (dev, test, hand), bundled names, world files or folders of them")
+                       help=f"comma-separated suites ({suites}), bundled names, world files or folders of them")
     views.add_argument("--per-world", type=int, default=25, metavar="N")
     views.add_argument("--seed", type=int, default=0, metavar="S")
     views.add_argument("--out", type=Path, required=True, metavar="DIR")
     check = commands.add_parser("check", help="check worlds as the simulator loads them: the format, textures and "
                                               "pictures, and the robot fits")
     check.add_argument("worlds", nargs="+", metavar="WORLD",
-                       help="suites (dev, test, hand), bundled names, world files or folders of them")
+                       help=f"suites ({suites}), bundled names, world files or folders of them")
     check.add_argument("--config", type=Path, metavar="FILE.toml", help="onboard configuration: the robot's size")
     args = parser.parse_args(argv)
     _setup_logging(False)

@@ -49,6 +49,11 @@ class Look:
     head_deg: tuple[float, float] | None = None  # (pan, tilt) the look was taken at, where logged
 
     @property
+    def camera_known(self) -> bool:
+        """Both the simulator's pose and the head's angles were logged: the true camera can be rebuilt."""
+        return self.truth is not None and self.head_deg is not None
+
+    @property
     def pose_error_m(self) -> float | None:
         """|believed − true| position."""
         return None if self.truth is None else math.dist(self.believed[:2], self.truth[:2])

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from offboard.experiments.calibration import LOCALISATION_FAR_M, Look, cell
+from offboard.experiments.world_facts import parse_placement
 
 CAUSES = ("not found", "localisation", "estimate")
 Groups = list[tuple[str, list[dict]]]  # (variant name, its rows), as the report groups runs
@@ -38,7 +39,7 @@ def last_true_look(looks: list[Look]) -> Look | None:
 
 
 def failure(variant: str, row: dict, last: Look | None) -> Failure:
-    target_xy = tuple(float(v) for v in row["target"].split(",")[:2])
+    target_xy = parse_placement(row["target"])[:2]
     shift = None if last is None else last.shift_at(target_xy)
     if not row["found"]:
         why = "not found"

@@ -52,7 +52,7 @@ from offboard.experiments.world_facts import (Placement, Start, WorldFacts, load
 from offboard.search.loop import Search, SearchConfig
 from shared.arguments import floats, probability
 from shared.config import load_config
-from shared.world import expand_suites, resolve_world
+from shared.world import expand_suites, resolve_world, suite_names
 
 if TYPE_CHECKING:
     from offboard.robot.robot_client import RobotClient
@@ -478,7 +478,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the grid to start from (paper: the report's 160 runs); the options below override it")
     parser.add_argument("--baselines", action="store_true", help="add every baseline to the methods")
     parser.add_argument("--worlds", type=_list(str), metavar="W,..",
-                        help="bundled world names, world files, folders of world files or suites (dev, test, hand)")
+                        help=f"bundled world names, world files, folders of world files or suites ({', '.join(suite_names())})")
     parser.add_argument("--costs", type=_list(int, (1, 2, 3, 4)), metavar="C,..")
     parser.add_argument("--priors", type=_list(str, PRIORS), metavar="P,..", help=", ".join(PRIORS))
     parser.add_argument("--seeds", type=_list(int), metavar="S,..", help="simulator seeds (and the random baseline's)")

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from offboard.experiments.calibration import MIN_LOOKS, Look, cell
-from offboard.experiments.world_facts import Truth, detector_table, load_facts, segments_hit_box
+from offboard.experiments.world_facts import Truth, detector_table, load_facts, parse_placement, segments_hit_box
 from offboard.perception.detectability import DetectabilityTable, facing_angle_deg
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 
@@ -52,7 +52,7 @@ def target_view(truth: Truth, look: Look, table: DetectabilityTable, mount: Head
     """The view of the target's best pictured face (by table rate) from the look's true camera; None
     if no face is all in the image and in plain sight, or for a look without the simulator's pose and
     the head's angles. A face seen from behind is in view, at rate 0."""
-    if look.truth is None or look.head_deg is None:
+    if not look.camera_known:
         return None
     x, y, heading = look.truth
     camera = mount.camera_in_world(Pose2D(x, y, math.radians(heading)), *np.radians(look.head_deg))
@@ -119,7 +119,7 @@ def target_views(runs: list[Run]) -> tuple[list[ViewedLook], int]:
     for number, (truth, looks, table) in enumerate(runs):
         missed = False
         for look in looks:
-            logged += look.truth is not None and look.head_deg is not None
+            logged += look.camera_known
             view = target_view(truth, look, table)
             if view is not None and view.rate >= RATE_EDGES[0]:
                 viewed.append(ViewedLook(view, look.detected, missed, number))
@@ -156,13 +156,7 @@ TABLED_DETECTORS = ("sift", "ncc")  # "auto" picks per search, and the looks do 
 @functools.cache
 def _truth(world: str, target: str) -> Truth:
     """The true room and target of a row; a ValueError naming what is wrong with either."""
-    try:
-        placement = tuple(float(v) for v in target.split(","))
-    except ValueError:
-        placement = ()
-    if len(placement) != 4 or not all(math.isfinite(v) for v in placement):
-        raise ValueError(f"target {target!r} is not x,y,z,yaw")
-    return load_facts(world).truth(placement)
+    return load_facts(world).truth(parse_placement(target))
 
 
 def viewed_runs(rows: list[dict], looks: list[list[Look]]) -> tuple[list[Run], list[str]]:
@@ -172,7 +166,7 @@ def viewed_runs(rows: list[dict], looks: list[list[Look]]) -> tuple[list[Run], l
     detector without a table), naming the run."""
     runs, left_out = [], []
     for row, run in zip(rows, looks):
-        if not any(look.truth and look.head_deg for look in run):
+        if not any(look.camera_known for look in run):
             continue
         if row["detector"] not in TABLED_DETECTORS:
             left_out.append(f"{row['key']}: detector {row['detector']!r} has no table of its own")

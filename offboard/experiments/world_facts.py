@@ -278,6 +278,17 @@ class WorldFacts:
                      self.target_size_m[2], self.target_size_m[1])
 
 
+def parse_placement(text: str) -> Placement:
+    """A target placement as results.csv writes it, ``x,y,z,yaw``; a ValueError naming it otherwise."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"target {text!r} is not x,y,z,yaw")
+    return values
+
+
 def load_facts(name_or_path: str) -> WorldFacts:
     """What the harness needs of a world (a bundled name or a file), validated by the world format."""
     path = resolve_world(name_or_path)
