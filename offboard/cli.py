@@ -147,7 +147,6 @@ def _demo(args: argparse.Namespace) -> int:
 # --- calibration -----------------------------------------------------------------------------------
 
 def _calibrate(args: argparse.Namespace) -> int:
-    import functools
     import shutil
     import tempfile
 
@@ -161,24 +160,19 @@ def _calibrate(args: argparse.Namespace) -> int:
 
     model = TargetModel.from_files(args.target_picture, args.target_size)
     grid = calibration.CalibrationGrid(samples=args.samples, negatives=args.negatives)
-    tallies = []
     with tempfile.TemporaryDirectory() as tmp:
+        world = Path(tmp) / "calibration.toml"
         shutil.copy(args.target_picture[0], Path(tmp) / "target.png")
-        for number, height in enumerate(grid.face_heights_m):  # one simulated room per height of the stand
-            world = Path(tmp) / "calibration.toml"
-            world.write_text(calibration.calibration_world("target.png", args.target_size, height))
-            negatives = grid.negatives // len(grid.face_heights_m) + (number < grid.negatives % len(grid.face_heights_m))
-            with onboard_agent(["--backend", "sim", "--world", str(world)], Path(tmp) / "onboard.log") as agent:
-                transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
-                with transport.open() as session, RobotClient(session, "syt") as robot:
-                    agent.wait_ready(session, "syt")
-                    info = robot.wait_for_robot()
-                    detector = make_detector(args.detector, model, info.intrinsics.to_intrinsics())
-                    face = np.array([calibration.TARGET_XY[0] + args.target_size[0] / 2, calibration.TARGET_XY[1], height])
-                    progress = functools.partial(_progress, f"height {number + 1}/{len(grid.face_heights_m)}")
-                    tallies.append(calibration.calibrate(robot, detector, grid, face, args.target_size[1], negatives,
-                                                         progress))
-    tally = calibration.Tally.merged(tallies)
+        world.write_text(calibration.calibration_world("target.png", args.target_size, 1.2))
+        with onboard_agent(["--backend", "sim", "--world", str(world)], Path(tmp) / "onboard.log") as agent:
+            transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
+            with transport.open() as session, RobotClient(session, "syt") as robot:
+                agent.wait_ready(session, "syt")
+                info = robot.wait_for_robot()
+                detector = make_detector(args.detector, model, info.intrinsics.to_intrinsics())
+                face = np.array([calibration.TARGET_XY[0] + args.target_size[0] / 2, calibration.TARGET_XY[1],
+                                 info.mount.height_m])
+                tally = calibration.calibrate(robot, detector, grid, face, args.target_size[1], _progress)
     table = calibration.to_table(args.detector, grid, tally)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     table.save(args.out)
@@ -187,9 +181,9 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _progress(stage: str, done: int, total: int) -> None:
+def _progress(done: int, total: int) -> None:
     if done % 10 == 0 or done == total:
-        sys.stderr.write(f"\rcalibrating, {stage}: {done}/{total} views")
+        sys.stderr.write(f"\rcalibrating: {done}/{total} views")
         sys.stderr.flush()
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from offboard.experiments.calibration import MIN_LOOKS, Look, cell
 from offboard.experiments.world_facts import Truth, detector_table, load_facts, parse_placement, segments_hit_box
-from offboard.perception.detectability import DetectabilityTable, view_geometry
+from offboard.perception.detectability import DetectabilityTable, facing_angle_deg
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 
 RATE_EDGES = (0.05, 0.2, 0.4, 0.6, 0.8, 1.0)  # a look below the first edge does not count as in view
@@ -69,7 +69,11 @@ def _face_view(truth: Truth, normal: np.ndarray, camera, table: DetectabilityTab
     eye = camera.translation
     if any(segments_hit_box(eye, points, np.array(box.min_m), np.array(box.max_m)).any() for box in truth.obstacles):
         return None
-    distance, off_axis, facing = view_geometry(camera, points[0], normal)
+    ray = points[0] - eye
+    distance = float(np.linalg.norm(ray))
+    off_axis = math.degrees(math.acos(np.clip(ray @ camera.rotation[:, 2] / distance, -1.0, 1.0)))
+    facing = float(facing_angle_deg(math.atan2(ray[1], ray[0]), math.atan2(normal[1], normal[0]),
+                                    math.asin(np.clip(ray[2] / distance, -1.0, 1.0))))
     rate = float(table.lookup(np.array([distance]), np.array([off_axis]), np.array([facing]))[0])
     return TargetView(rate, distance, off_axis, facing)
 

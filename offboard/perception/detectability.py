@@ -18,8 +18,6 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from shared.geometry import RigidTransform
-
 
 @dataclass(frozen=True)
 class DetectabilityTable:
@@ -53,9 +51,14 @@ class DetectabilityTable:
 
     def lookup(self, distance_m: np.ndarray, off_axis_deg: np.ndarray, facing_deg: np.ndarray) -> np.ndarray:
         """Detection probability per query (nearest cell; zero outside the measured ranges)."""
-        idx, inside = cell_indices((self.distance_edges_m, self.off_axis_edges_deg, self.facing_edges_deg),
-                                   (distance_m, np.abs(off_axis_deg), np.abs(facing_deg)))
-        return np.where(inside, self.rate[idx], 0.0)
+        idx = [np.searchsorted(edges, np.asarray(x), side="right") - 1 for edges, x in
+               ((self.distance_edges_m, distance_m), (self.off_axis_edges_deg, np.abs(off_axis_deg)),
+                (self.facing_edges_deg, np.abs(facing_deg)))]
+        inside = np.ones(np.broadcast(*idx).shape, bool)
+        for i, n in zip(idx, self.rate.shape):
+            inside &= (i >= 0) & (i < n)
+        clipped = [np.clip(i, 0, n - 1) for i, n in zip(idx, self.rate.shape)]
+        return np.where(inside, self.rate[tuple(clipped)], 0.0)
 
     # --- persistence -------------------------------------------------------------------------------
 
@@ -102,28 +105,6 @@ def facing_angle_deg(view_azimuth_rad: np.ndarray, facing_azimuth_rad: np.ndarra
     facing = np.asarray(facing_azimuth_rad, float)
     cos = np.cos(view_elevation_rad) * np.cos(facing - (np.asarray(view_azimuth_rad) + math.pi))
     return np.where(np.isnan(facing), 0.0, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
-
-
-def cell_indices(edges: tuple[np.ndarray, ...], values: tuple) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
-    """The cell of each query along every axis (clipped into the table) and whether it is inside all
-    of the axes' edges."""
-    idx = [np.searchsorted(e, np.asarray(v), side="right") - 1 for e, v in zip(edges, values)]
-    inside = np.ones(np.broadcast(*idx).shape, bool)
-    for i, e in zip(idx, edges):
-        inside &= (i >= 0) & (i < len(e) - 1)
-    return tuple(np.clip(i, 0, len(e) - 2) for i, e in zip(idx, edges)), inside
-
-
-def view_geometry(camera_in_world: RigidTransform, point_m: np.ndarray, normal: np.ndarray) -> tuple[float, float, float]:
-    """The table's three axes for ``point_m`` on a face with horizontal ``normal``, seen from a camera
-    (``T_world_camera``, z along the optical axis): distance (m), angle off the optical axis (°) and
-    angle off the face's normal (°), as the planner's kernels reckon them."""
-    ray = np.asarray(point_m, float) - camera_in_world.translation
-    distance = float(np.linalg.norm(ray))
-    off_axis = math.degrees(math.acos(np.clip(ray @ camera_in_world.rotation[:, 2] / distance, -1.0, 1.0)))
-    facing = float(facing_angle_deg(math.atan2(ray[1], ray[0]), math.atan2(normal[1], normal[0]),
-                                    math.asin(np.clip(ray[2] / distance, -1.0, 1.0))))
-    return distance, off_axis, facing
 
 
 @numba.njit(cache=True, inline="always")
