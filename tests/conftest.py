@@ -26,6 +26,12 @@ from shared.transport import TransportConfig
 RES = 0.05  # the floor maps' cell size in the navigation tests
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The long tests first (a stable sort keeps the rest in order): two workers then share them from
+    the start, instead of one running a whole search alone at the end while the other waits."""
+    items.sort(key=lambda item: item.get_closest_marker("long") is None)
+
+
 def wait_until(predicate, timeout_s: float, poll_s: float = 0.02) -> bool:
     """Poll ``predicate`` until it holds (True) or ``timeout_s`` has passed (False)."""
     deadline = time.monotonic() + timeout_s

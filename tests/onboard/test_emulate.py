@@ -95,6 +95,7 @@ def test_bench_hardware_meets_its_targets():
 TARGET = (4.5, 2.4, 0.75, -90.0)
 
 
+@pytest.mark.long
 def test_the_search_through_the_serial_drivers_finds_the_target(tmp_path):
     """paper-lab, cost 3: the agent drives the emulated Pioneer and PTU through the real drivers;
     the camera renders the emulated truth."""

@@ -18,6 +18,7 @@ from shared.transport import DEFAULT_LEASE_MS
 pytestmark = pytest.mark.integration
 
 
+@pytest.mark.long
 def test_the_robot_stops_when_its_planner_is_killed_frozen_or_cut_off(tmp_path):
     with ExitStack() as stack:
         agent = realtime_agent(stack, tmp_path, DEFAULT_LEASE_MS)

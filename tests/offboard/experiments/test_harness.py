@@ -387,6 +387,7 @@ def test_nothing_sees_a_target_facing_a_wall():
 
 # --- one real sweep --------------------------------------------------------------------------------
 
+@pytest.mark.long
 @pytest.mark.integration
 def test_a_tiny_sweep_end_to_end_and_a_redone_run_gives_the_same_numbers(tmp_path):
     # the planner's processing fixed: measured, it makes decisions depend on how loaded the machine is
@@ -410,6 +411,7 @@ def test_a_tiny_sweep_end_to_end_and_a_redone_run_gives_the_same_numbers(tmp_pat
         assert redone[column] == before[column], column
 
 
+@pytest.mark.long
 @pytest.mark.integration
 def test_a_failed_run_is_a_row_naming_why_and_the_worker_goes_on(tmp_path):
     impossible = "4.5,2.5,0.3,-90"  # inside the centre table: the simulator refuses the placement

@@ -169,6 +169,7 @@ def _wait_for_actions(out: Path, actions: int, process: subprocess.Popen, timeou
     raise AssertionError(f"no checkpoint with {actions} actions after {timeout_s} s")
 
 
+@pytest.mark.long
 @pytest.mark.integration
 def test_a_search_killed_mid_way_resumes_from_its_checkpoint_and_finds_the_target(tmp_path):
     out, picture = tmp_path / "out", tmp_path / "target.png"

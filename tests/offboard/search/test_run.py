@@ -64,6 +64,7 @@ def _recorded_images(rrd: Path) -> Counter:
     return ticks
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("world,start", WORLDS, ids=[w for w, _ in WORLDS])
 def test_the_search_finds_the_target_in_every_bundled_world(tmp_path, world, start):
     summary, out = _search(tmp_path, world, *([] if start is None else ["--start", start]))
@@ -112,6 +113,7 @@ heading_deg = 90
 """
 
 
+@pytest.mark.long
 def test_a_world_it_has_never_seen_works_without_changes(tmp_path):
     world = tmp_path / "storage-room.toml"
     world.write_text(UNSEEN_WORLD)
@@ -119,6 +121,7 @@ def test_a_world_it_has_never_seen_works_without_changes(tmp_path):
     _assert_found_near_truth(summary, world)
 
 
+@pytest.mark.long
 def test_a_target_seen_on_the_way_stops_the_move(tmp_path):
     # a dev room (the tuning suite): after looking round from this start, the robot drives across the
     # room, and a frame toward the motion shows the target's picture on a shelf ahead
@@ -134,6 +137,7 @@ def test_a_target_seen_on_the_way_stops_the_move(tmp_path):
     assert summary["glances"] > 0
 
 
+@pytest.mark.long
 def test_a_robot_its_map_boxes_in_squeezes_through_and_finds_the_target(tmp_path):
     # the start's pocket has two ways out that the navigator's margin shuts on the map; before the
     # search chose again on the bare radius it stopped here as exhausted, 2 of 57 positions reachable
