@@ -111,20 +111,31 @@ class ViewGroup:
 Run = tuple[Truth, list[Look], DetectabilityTable]  # the true room and target, the looks, the run's detector's table
 
 
-def target_views(runs: list[Run]) -> tuple[list[ViewedLook], int]:
+def target_views(runs: list[Run]) -> tuple[list[ViewedLook], int, int]:
     """The looks of every run with the target in view (its table rate at least the first of
-    :data:`RATE_EDGES`); and how many looks had the simulator's pose and the head's angles logged."""
+    :data:`RATE_EDGES`), each view of a run once; how many looks had the simulator's pose and the
+    head's angles logged; and how many more in view repeated a view their run had already had.
+
+    A repeated view (the same pose and head angles, as when the robot looks again without moving to
+    confirm a detection) is rendered exactly again, so the detector answers as before: it is no new
+    draw, and counting it would weigh a lucky or unlucky view twice."""
     viewed: list[ViewedLook] = []
-    logged = 0
+    logged = repeated = 0
     for number, (truth, looks, table) in enumerate(runs):
         missed = False
+        had = set()
         for look in looks:
             logged += look.camera_known
             view = target_view(truth, look, table)
-            if view is not None and view.rate >= RATE_EDGES[0]:
-                viewed.append(ViewedLook(view, look.detected, missed, number))
-                missed = missed or not look.detected
-    return viewed, logged
+            if view is None or view.rate < RATE_EDGES[0]:
+                continue
+            if (camera := (look.truth, look.head_deg)) in had:
+                repeated += 1
+                continue
+            had.add(camera)
+            viewed.append(ViewedLook(view, look.detected, missed, number))
+            missed = missed or not look.detected
+    return viewed, logged, repeated
 
 
 def _groups(looks: list[ViewedLook], value, edges: tuple[float, ...], unit: str = "") -> list[ViewGroup]:
@@ -178,15 +189,19 @@ def viewed_runs(rows: list[dict], looks: list[list[Look]]) -> tuple[list[Run], l
     return runs, left_out
 
 
-def target_views_md(looks: list[ViewedLook], logged: int, source: str, left_out: list[str] = ()) -> list[str]:
+def target_views_md(looks: list[ViewedLook], logged: int, repeated: int, source: str,
+                    left_out: list[str] = ()) -> list[str]:
     if not logged and not left_out:
         return []  # a sweep from before the looks logged the head's angles
     lines = ["## The detector where the target was", "",
              f"Over {source}: {logged} looks logged the simulator's pose and the head's angles; in {len(looks)} of them the "
              f"target's picture was in view (the run's detector's table gives at least {RATE_EDGES[0]:g} from the true camera, "
-             "the picture all in the image, nothing in the way). Binned by that table rate: the share of them on which "
-             "the detector fired, for all of them and split at each run's first miss in view. Eq. 4 treats looks as "
-             "independent draws: if they are, a look after a miss finds the target as often as one before.", "",
+             "the picture all in the image, nothing in the way). Each view of a run counts once: "
+             f"{repeated} more looks in view repeated one (the same pose and head angles, mostly to confirm a detection), "
+             "which the simulator renders exactly again, so the detector answered as before. Binned by that table rate: "
+             "the share of them on which the detector fired, for all of them and split at each run's first miss in view. "
+             "Eq. 4 treats looks as independent draws: if they are, a look after a miss finds the target as often as one "
+             "before.", "",
              "| Table rate | Looks (runs) | Mean table rate | Detected | Before a miss (looks) | After a miss (looks) |",
              "|---|---|---|---|---|---|"]
     rates = by_rate(looks)

@@ -43,8 +43,9 @@ def test_looks_are_binned_by_table_rate_and_split_at_the_runs_first_miss_in_view
     away = _look(3.0, 2.0, -90.0)  # not in view: counted as logged, not binned
     near, far = _look(3.0, 2.0, 90.0), _look(3.0, 0.3, 90.0)  # rates above 0.8, and lower at 3.6 m
     found = replace(near, detected=True)
-    viewed, logged = target_views([(TRUTH, [away, far, found], TABLE), (TRUTH, [found], TABLE)])
-    assert logged == 4 and len(viewed) == 3
+    again = replace(found, action=9)  # the same view taken again: the same image, so no new draw
+    viewed, logged, repeated = target_views([(TRUTH, [away, far, found, again], TABLE), (TRUTH, [found], TABLE)])
+    assert logged == 5 and len(viewed) == 3 and repeated == 1  # run 1's view is its own first
     rates = by_rate(viewed)
     top, far_rate = rates[-1], target_view(TRUTH, far, TABLE).rate
     low = next(g for g in rates if far_rate in [v.view.rate for v in g.looks])
@@ -53,11 +54,11 @@ def test_looks_are_binned_by_table_rate_and_split_at_the_runs_first_miss_in_view
     assert top.detection_rate() == 1.0 and top.count(True) == 1 and top.runs == 2 and low.detection_rate() == 0.0
     assert [len(g.looks) for g in by_distance(viewed)] == [2, 1, 0]  # under 2 m, 2-4 m, 4 m or more
     assert [len(g.looks) for g in by_off_normal(viewed)] == [3, 0, 0]  # all nearly head-on
-    text = "\n".join(target_views_md(viewed, logged, "two runs"))
-    assert "4 looks logged" in text and "in 3 of them" in text
+    text = "\n".join(target_views_md(viewed, logged, repeated, "two runs"))
+    assert "5 looks logged" in text and "in 3 of them" in text and "1 more looks in view repeated one" in text
     assert "| [0.8, 1] | 2 (2) | " in text and "| 1.00 (1) | 1.00 (1) |" in text
     assert "| [2, 4) m | 1 (1) | " in text and "| ≥ 4 m | 0 (0) | — | — |" in text and "| [60, 90]° | 0 (0) |" in text
-    assert target_views_md(viewed, 0, "an old sweep") == []  # looks from before the head's angles were logged
+    assert target_views_md(viewed, 0, 0, "an old sweep") == []  # looks from before the head's angles were logged
 
 
 def test_a_look_logs_the_heads_angles_and_a_malformed_one_is_refused():
