@@ -7,13 +7,16 @@ talking to this one over real Zenoh, exactly as on two machines.
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
 import logging
+import os
 import signal
 import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +25,27 @@ import zenoh
 from shared.keys import RobotKeys
 
 log = logging.getLogger(__name__)
+
+
+PR_SET_PDEATHSIG = 1  # prctl(2): the signal the kernel sends a process when its parent dies
+
+
+def _die_with_parent() -> Callable[[], None] | None:
+    """For ``Popen(preexec_fn=...)`` on Linux: the child asks the kernel for SIGINT when its parent
+    dies, however it dies (killed, crashed), so a planner that is gone never leaves its simulated
+    robot running; SIGINT is the agent's clean shutdown. The C function is looked up here, in the
+    parent: between fork and exec the child only calls it (no imports, no allocation)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    prctl = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True).prctl
+    parent = os.getpid()
+
+    def arm() -> None:
+        prctl(PR_SET_PDEATHSIG, signal.SIGINT)
+        if os.getppid() != parent:  # the parent died before the request was in place
+            os.kill(os.getpid(), signal.SIGINT)
+
+    return arm
 
 
 def free_tcp_port() -> int:
@@ -58,7 +82,8 @@ def onboard_agent(agent_args: list[str], log_path: Path | None = None,
     cmd = [sys.executable, "-m", "onboard.cli", *agent_args, "--listen", endpoint, "--no-multicast-scouting"]
     log.info("starting the onboard agent: %s", " ".join(cmd[2:]))
     stderr = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115 - closed below
-    process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=stderr)
+    process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=stderr,
+                               preexec_fn=_die_with_parent())  # safe with threads about: it only calls prctl
     try:
         yield LoopbackAgent(endpoint, process, log_path)
     finally:
