@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import ctypes.util
 import logging
 import os
 import signal
@@ -31,19 +30,21 @@ PR_SET_PDEATHSIG = 1  # prctl(2): the signal the kernel sends a process when its
 
 
 def _die_with_parent() -> Callable[[], None] | None:
-    """For ``Popen(preexec_fn=...)`` on Linux: the child asks the kernel for SIGINT when its parent
+    """For ``Popen(preexec_fn=...)`` on Linux: the child asks the kernel for SIGTERM when its parent
     dies, however it dies (killed, crashed), so a planner that is gone never leaves its simulated
-    robot running; SIGINT is the agent's clean shutdown. The C function is looked up here, in the
-    parent: between fork and exec the child only calls it (no imports, no allocation)."""
+    robot running. SIGTERM, not SIGINT: the agent shuts down cleanly on either, but a shell that
+    starts a job in the background makes its children ignore SIGINT. The C function is looked up
+    here, in the parent; the child only calls it before it execs the agent."""
     if not sys.platform.startswith("linux"):
         return None
-    prctl = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True).prctl
+    prctl = ctypes.CDLL(None, use_errno=True).prctl
     parent = os.getpid()
 
     def arm() -> None:
-        prctl(PR_SET_PDEATHSIG, signal.SIGINT)
+        if prctl(PR_SET_PDEATHSIG, signal.SIGTERM) != 0:
+            raise OSError(ctypes.get_errno(), "prctl(PR_SET_PDEATHSIG) failed")  # Popen reports it
         if os.getppid() != parent:  # the parent died before the request was in place
-            os.kill(os.getpid(), signal.SIGINT)
+            os._exit(1)
 
     return arm
 
@@ -83,7 +84,7 @@ def onboard_agent(agent_args: list[str], log_path: Path | None = None,
     log.info("starting the onboard agent: %s", " ".join(cmd[2:]))
     stderr = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115 - closed below
     process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=stderr,
-                               preexec_fn=_die_with_parent())  # safe with threads about: it only calls prctl
+                               preexec_fn=_die_with_parent())
     try:
         yield LoopbackAgent(endpoint, process, log_path)
     finally:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -14,28 +15,35 @@ from conftest import wait_until
 pytestmark = pytest.mark.integration
 
 PLANNER = textwrap.dedent("""
-    import sys, time
+    import signal, sys, time
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # as in a shell's background job: the agent inherits it
     from shared.launch import onboard_agent
+    from shared.transport import TransportConfig
     with onboard_agent(["--backend", "sim", "--world", "paper-lab"], None) as agent:
+        if sys.argv[1] == "serving":  # else still starting: importing, loading, compiling, no handlers yet
+            with TransportConfig(connect=(agent.endpoint,), multicast_scouting=False).open() as session:
+                agent.wait_ready(session, "syt")
         print(agent.process.pid, flush=True)
         time.sleep(600)
 """)
 
 
 def _alive(pid: int) -> bool:
+    """Running, not a zombie (which has exited; only its entry waits for a reaper) nor gone."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().split(")")[-1].split()[0] != "Z"
+    except FileNotFoundError:
         return False
-    # a zombie has exited; only its entry waits for a reaper
-    with open(f"/proc/{pid}/stat") as stat:
-        return stat.read().split(")")[-1].split()[0] != "Z"
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the parent-death signal is Linux's")
-def test_the_agent_stops_when_its_planner_is_killed_outright():
-    planner = subprocess.Popen([sys.executable, "-c", PLANNER], stdout=subprocess.PIPE, text=True)
-    agent_pid = int(planner.stdout.readline())
+@pytest.mark.parametrize("agent_is", ["starting", "serving"])
+def test_the_agent_stops_when_its_planner_is_killed_outright(agent_is):
+    planner = subprocess.Popen([sys.executable, "-c", PLANNER, agent_is], stdout=subprocess.PIPE, text=True)
+    line = planner.stdout.readline()
+    assert line, "the planner did not start its agent"
+    agent_pid = int(line)
     try:
         assert _alive(agent_pid)
         planner.send_signal(signal.SIGKILL)  # no finally block runs: only the kernel can tell the agent
@@ -44,4 +52,5 @@ def test_the_agent_stops_when_its_planner_is_killed_outright():
     finally:
         planner.kill()
         if _alive(agent_pid):  # leave no robot behind, even when the test fails
-            os.kill(agent_pid, signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(agent_pid, signal.SIGKILL)
