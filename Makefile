@@ -15,8 +15,10 @@ $(STAMP): pyproject.toml constraints.txt
 demo: $(STAMP)
 	$(VENV)/bin/syt-offboard demo --out demo-out
 
+# --maxschedchunk 1: tests go to the two workers a few at a time, not in blocks of a hundred, so the long
+# tests (collected first, see tests/conftest.py) are shared between them
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2 --durations=10
+	$(PY) -m pytest -q -n 2 --maxschedchunk 1 --durations=10
 
 bench: $(STAMP)
 	$(VENV)/bin/syt-onboard bench --json
