@@ -34,7 +34,9 @@ def _die_with_parent() -> Callable[[], None] | None:
     dies, however it dies (killed, crashed), so a planner that is gone never leaves its simulated
     robot running. SIGTERM, not SIGINT: the agent shuts down cleanly on either, but a shell that
     starts a job in the background makes its children ignore SIGINT. The C function is looked up
-    here, in the parent; the child only calls it before it execs the agent."""
+    here, in the parent; the child only calls it before it execs the agent. The kernel reckons the
+    parent as the *thread* that started the agent: start one from a thread that lives as long as
+    the agent should (every caller here uses its main thread)."""
     if not sys.platform.startswith("linux"):
         return None
     prctl = ctypes.CDLL(None, use_errno=True).prctl
