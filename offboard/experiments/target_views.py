@@ -28,6 +28,7 @@ import numpy as np
 from offboard.experiments.calibration import MIN_LOOKS, Look, cell
 from offboard.experiments.world_facts import Truth, detector_table, load_facts, parse_placement, segments_hit_box
 from offboard.perception.detectability import DetectabilityTable, facing_angle_deg
+from offboard.perception.detection.detector import detector_names
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 
 RATE_EDGES = (0.05, 0.2, 0.4, 0.6, 0.8, 1.0)  # a look below the first edge does not count as in view
@@ -126,11 +127,11 @@ def target_views(runs: list[Run]) -> tuple[list[ViewedLook], int, int]:
         had = set()
         for look in looks:
             logged += look.camera_known
+            if (camera := (look.truth, look.head_deg)) in had:  # it was in view the first time, so again
+                repeated += 1
+                continue
             view = target_view(truth, look, table)
             if view is None or view.rate < RATE_EDGES[0]:
-                continue
-            if (camera := (look.truth, look.head_deg)) in had:
-                repeated += 1
                 continue
             had.add(camera)
             viewed.append(ViewedLook(view, look.detected, missed, number))
@@ -161,9 +162,6 @@ def by_off_normal(looks: list[ViewedLook]) -> list[ViewGroup]:
     return _groups(looks, lambda v: v.off_normal_deg, OFF_NORMAL_EDGES_DEG, "°")
 
 
-TABLED_DETECTORS = ("sift", "ncc")  # "auto" picks per search, and the looks do not say which it used
-
-
 @functools.cache
 def _truth(world: str, target: str) -> Truth:
     """The true room and target of a row; a ValueError naming what is wrong with either."""
@@ -179,7 +177,7 @@ def viewed_runs(rows: list[dict], looks: list[list[Look]]) -> tuple[list[Run], l
     for row, run in zip(rows, looks):
         if not any(look.camera_known for look in run):
             continue
-        if row["detector"] not in TABLED_DETECTORS:
+        if row["detector"] not in detector_names():  # "auto" picks per search; the looks do not say which
             left_out.append(f"{row['key']}: detector {row['detector']!r} has no table of its own")
             continue
         try:
