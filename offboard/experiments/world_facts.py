@@ -12,12 +12,10 @@
 
 from __future__ import annotations
 
-import functools
 import math
 import subprocess
 import sys
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 
 import cv2
@@ -25,6 +23,7 @@ import numpy as np
 
 from offboard.navigation import grid_planner
 from offboard.perception.detectability import DetectabilityTable, facing_angle_deg
+from offboard.perception.detection.detector import shipped_table
 from offboard.perception.occupancy import FloorMap
 from shared.geometry import HeadMount
 from shared.limits import PanTiltLimits
@@ -79,11 +78,11 @@ class Truth:
         return np.array([centre] + [centre + a * across + b * up for a in (-1, 1) for b in (-1, 1)])
 
 
-@functools.cache
 def detector_table(detector: str = "sift") -> DetectabilityTable:
     """The detectability table shipped for ``detector``: the one the searches of the bundled target load."""
-    shipped = resources.files("offboard.perception.detection") / "tables" / f"{detector}.json"
-    return DetectabilityTable.load(Path(str(shipped)))
+    if (table := shipped_table(detector)) is None:
+        raise ValueError(f"no detectability table is shipped for detector {detector!r}")
+    return table
 
 
 @dataclass(frozen=True)

@@ -12,13 +12,12 @@ import json
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from offboard.planning import priors
 from offboard.perception.detectability import DetectabilityTable
-from offboard.perception.detection.detector import Detector, make_detector
+from offboard.perception.detection.detector import Detector, make_detector, shipped_table
 from offboard.perception.detection.target_model import TargetModel
 from offboard.search.recording import Recorder
 from offboard.robot.robot_client import RobotClient
@@ -80,9 +79,8 @@ def detectability_table(name: str, detector: Detector, files: dict[str, Path]) -
     else a nominal one over the detector's own range."""
     if name in files:
         return DetectabilityTable.load(files[name])
-    shipped = resources.files("offboard.perception.detection") / "tables" / f"{name}.json"
-    if shipped.is_file():
-        return DetectabilityTable.load(Path(str(shipped)))
+    if shipped := shipped_table(name):
+        return shipped
     near, far = detector.range_m
     log.warning("no measured detectability table for %s: using a nominal one over %.2f-%.2f m", name, near, far)
     return DetectabilityTable.nominal(name, near_m=near, far_m=far, cost_ms=detector.cost_ms)

@@ -2,7 +2,8 @@
 
 - :class:`Detection`: where the target's pictured face was found in the left image.
 - :class:`Detector`: the protocol (``detect``, ``name``, measured ``cost_ms``, ``range_m``).
-- :func:`make_detector`: the one registry of detectors by name.
+- :func:`make_detector`: the one registry of detectors by name; :func:`shipped_table`: the
+  detectability table measured for each on the bundled target (``tables/``).
 - :func:`locate_target`: the face's 3D centre from the detection and the stereo disparity.
 - :func:`operating_range` and :class:`CostMeter`: the range and cost figures the detectors report.
 
@@ -13,17 +14,21 @@ those of ``Intrinsics.project``: pixel centres at integers, so a face's outer ed
 
 from __future__ import annotations
 
+import functools
 import importlib
 import math
 import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 import cv2
 import numpy as np
 
+from offboard.perception.detectability import DetectabilityTable
 from offboard.perception.detection.target_model import TargetModel
 from shared.geometry import Intrinsics, RigidTransform
 
@@ -85,6 +90,14 @@ class Detector(Protocol):
 
 def detector_names() -> list[str]:
     return sorted(_REGISTRY)
+
+
+@functools.cache
+def shipped_table(name: str) -> DetectabilityTable | None:
+    """The detectability table measured for detector ``name`` on the bundled target
+    (``syt-offboard calibrate-detector``), or None if none is shipped."""
+    shipped = resources.files("offboard.perception.detection") / "tables" / f"{name}.json"
+    return DetectabilityTable.load(Path(str(shipped))) if shipped.is_file() else None
 
 
 def make_detector(name: str, model: TargetModel, intrinsics: Intrinsics, **options: object) -> Detector:
