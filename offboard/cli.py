@@ -153,6 +153,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from offboard.perception import calibration
+    from offboard.perception.detectability import face_size_m
     from offboard.perception.detection.detector import make_detector
     from offboard.perception.detection.target_model import TargetModel
     from offboard.robot.robot_client import RobotClient
@@ -173,7 +174,7 @@ def _calibrate(args: argparse.Namespace) -> int:
                 face = np.array([calibration.TARGET_XY[0] + args.target_size[0] / 2, calibration.TARGET_XY[1],
                                  info.mount.height_m])
                 tally = calibration.calibrate(robot, detector, grid, face, args.target_size[1], _progress)
-    table = calibration.to_table(args.detector, grid, tally)
+    table = calibration.to_table(args.detector, grid, tally, face_size_m(model.face_width_m, model.face_height_m))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     table.save(args.out)
     sys.stderr.write("\n")

@@ -109,7 +109,7 @@ class ViewGroup:
         return sum(v.view.rate for v in self.looks) / len(self.looks) if self.looks else None
 
 
-Run = tuple[Truth, list[Look], DetectabilityTable]  # the true room and target, the looks, the run's detector's table
+Run = tuple[Truth, list[Look], DetectabilityTable]  # the true room and target, the looks, the run's detector's table for that target
 
 
 def target_views(runs: list[Run]) -> tuple[list[ViewedLook], int, int]:
@@ -181,7 +181,8 @@ def viewed_runs(rows: list[dict], looks: list[list[Look]]) -> tuple[list[Run], l
             left_out.append(f"{row['key']}: detector {row['detector']!r} has no table of its own")
             continue
         try:
-            runs.append((_truth(row["world"], row["target"]), run, detector_table(row["detector"])))
+            truth = _truth(row["world"], row["target"])
+            runs.append((truth, run, detector_table(row["detector"]).for_face(truth.face_size_m)))
         except ValueError as exc:  # WorldError is one
             left_out.append(f"{row['key']}: {exc}")
     return runs, left_out

@@ -15,14 +15,14 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from offboard.navigation import grid_planner
-from offboard.perception.detectability import DetectabilityTable, facing_angle_deg
+from offboard.perception.detectability import DetectabilityTable, face_size_m, facing_angle_deg
 from offboard.perception.detection.detector import shipped_table
 from offboard.perception.occupancy import FloorMap
 from shared.geometry import HeadMount
@@ -58,6 +58,10 @@ class Truth:
     target_sides: int = 1  # pictured vertical faces: 1, or 4 (yaw and every quarter turn from it)
     target_height_m: float = 0.23  # the picture's height
     target_width_m: float = 0.23  # and width
+
+    @property
+    def face_size_m(self) -> float:
+        return face_size_m(self.target_width_m, self.target_height_m)
 
     def face_normals(self) -> list[np.ndarray]:
         yaws = [math.radians(self.target_yaw_deg + 90.0 * k) for k in range(self.target_sides)]
@@ -178,7 +182,9 @@ def segments_hit_box(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndar
 
 
 def seeing_cells(truth: Truth, floor: FloorMap, criteria: SeeingCriteria = SeeingCriteria()) -> np.ndarray:
-    """Free floor cells from which the camera sees one of the target's pictures (bool, the floor map's shape)."""
+    """Free floor cells from which the camera sees one of the target's pictures (bool, the floor map's shape),
+    by the criteria's table rescaled to the target's size."""
+    criteria = replace(criteria, table=criteria.table.for_face(truth.face_size_m))
     seen = np.zeros(floor.blocked.shape, bool)
     for normal in truth.face_normals():
         seen |= _seeing_face(truth, floor, criteria, normal)

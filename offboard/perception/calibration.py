@@ -126,12 +126,14 @@ def calibrate(robot: RobotClient, detector: Detector, grid: CalibrationGrid, fac
     return tally
 
 
-def to_table(name: str, grid: CalibrationGrid, tally: Tally) -> DetectabilityTable:
+def to_table(name: str, grid: CalibrationGrid, tally: Tally, face_size_m: float) -> DetectabilityTable:
+    """The table of detector ``name`` from its calibration's tally, for a target of face size ``face_size_m``."""
     rate = pooled_rate(tally.hits, tally.views)
     views = tally.negative_views + int(tally.views.sum())
     return DetectabilityTable(name, np.array(grid.distance_edges_m), np.array(grid.off_axis_edges_deg),
                               np.array(grid.facing_edges_deg), rate, tally.views,
-                              tally.false_positives / max(views, 1), float(np.median(tally.detect_ms or [0.0])))
+                              tally.false_positives / max(views, 1), float(np.median(tally.detect_ms or [0.0])),
+                              face_size_m)
 
 
 def pooled_rate(hits: np.ndarray, views: np.ndarray) -> np.ndarray:

@@ -6,13 +6,17 @@ ray and the normal of the target's pictured face. It is *measured* by running th
 simulated views (``syt-offboard calibrate-detector``) and saved as JSON; the planner's detection
 function b(c, f) reads it. :meth:`DetectabilityTable.nominal` gives a smooth stand-in for tests and
 for a detector that has not been calibrated yet.
+
+A table holds for the size of face it was measured with. A detector sees a picture by its size in
+pixels, so a face k times as large is found as often from k times as far:
+:meth:`DetectabilityTable.for_face` rescales the distance axis to the target at hand.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numba
@@ -29,6 +33,7 @@ class DetectabilityTable:
     samples: np.ndarray  # (nd, no, nf) views measured per cell (0 for a nominal table)
     false_positive_rate: float  # false detections per image without the target
     cost_ms: float  # median cost of the detector per image
+    face_size_m: float | None = None  # face_size_m() of the target it was measured with; None: any (nominal)
 
     def __post_init__(self) -> None:
         shape = (len(self.distance_edges_m) - 1, len(self.off_axis_edges_deg) - 1, len(self.facing_edges_deg) - 1)
@@ -40,6 +45,18 @@ class DetectabilityTable:
             steps = np.diff(getattr(self, name))
             if steps.size == 0 or steps.min() <= 0 or not np.allclose(steps, steps[0]):
                 raise ValueError(f"{name} must be evenly spaced and increasing (bins are looked up by arithmetic)")
+        if self.face_size_m is not None and not (math.isfinite(self.face_size_m) and self.face_size_m > 0):
+            raise ValueError(f"face_size_m must be a positive size in metres, not {self.face_size_m}")
+
+    def for_face(self, face_size_m: float) -> DetectabilityTable:
+        """This table for a target whose face has size ``face_size_m`` (see :func:`face_size_m`): its
+        distances scaled by the ratio of the sizes (none for a table of no particular size)."""
+        if self.face_size_m is None or face_size_m == self.face_size_m:
+            return self
+        if not (math.isfinite(face_size_m) and face_size_m > 0):
+            raise ValueError(f"a face's size must be positive, not {face_size_m}")
+        return replace(self, distance_edges_m=self.distance_edges_m * (face_size_m / self.face_size_m),
+                       face_size_m=face_size_m)
 
     @property
     def range_m(self) -> tuple[float, float]:
@@ -64,18 +81,20 @@ class DetectabilityTable:
 
     def save(self, path: Path) -> None:
         data = {"detector": self.detector, "false_positive_rate": self.false_positive_rate,
-                "cost_ms": self.cost_ms,
+                "cost_ms": self.cost_ms, "face_size_m": self.face_size_m,
                 **{k: getattr(self, k).tolist() for k in
                    ("distance_edges_m", "off_axis_edges_deg", "facing_edges_deg", "rate", "samples")}}
         Path(path).write_text(json.dumps(data))
 
     @classmethod
     def load(cls, path: Path) -> DetectabilityTable:
+        """A table :meth:`save` wrote; one written before tables knew their face's size holds for any."""
         try:
             data = json.loads(Path(path).read_text())
             return cls(data["detector"], *(np.asarray(data[k], float) for k in
                                            ("distance_edges_m", "off_axis_edges_deg", "facing_edges_deg", "rate")),
-                       np.asarray(data["samples"], int), float(data["false_positive_rate"]), float(data["cost_ms"]))
+                       np.asarray(data["samples"], int), float(data["false_positive_rate"]), float(data["cost_ms"]),
+                       None if data.get("face_size_m") is None else float(data["face_size_m"]))
         except (OSError, KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{path}: not a detectability table ({exc})") from None
 
@@ -95,6 +114,11 @@ class DetectabilityTable:
         by_facing = np.where(f <= max_facing_deg, np.cos(np.radians(f)) ** 0.5, 0.0)
         rate = peak * by_distance[:, None, None] * by_off_axis[None, :, None] * by_facing[None, None, :]
         return cls(detector, d_edges, o_edges, f_edges, rate, np.zeros(rate.shape, int), 0.0, cost_ms)
+
+
+def face_size_m(width_m: float, height_m: float) -> float:
+    """One size for a pictured face, √(width × height): what a detectability table scales with."""
+    return math.sqrt(width_m * height_m)
 
 
 def facing_angle_deg(view_azimuth_rad: np.ndarray, facing_azimuth_rad: np.ndarray,

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from offboard.planning import priors
-from offboard.perception.detectability import DetectabilityTable
+from offboard.perception.detectability import DetectabilityTable, face_size_m
 from offboard.perception.detection.detector import Detector, make_detector, shipped_table
 from offboard.perception.detection.target_model import TargetModel
 from offboard.search.recording import Recorder
@@ -87,13 +87,15 @@ def detectability_table(name: str, detector: Detector, files: dict[str, Path]) -
 
 
 def build_detectors(detector: str, request: SearchRequest, model: TargetModel, intrinsics: Intrinsics) -> dict:
-    """The detectors ``detector`` names ("auto": both), each with its detectability table."""
+    """The detectors ``detector`` names ("auto": both), each with its detectability table for the
+    target's size."""
     files = dict(_name_file(spec) for spec in request.detectability)
     names = ("sift", "ncc") if detector == "auto" else (detector,)
+    face = face_size_m(model.face_width_m, model.face_height_m)
     detectors = {}
     for name in names:
         detector = make_detector(name, model, intrinsics)
-        detectors[name] = (detector, detectability_table(name, detector, files))
+        detectors[name] = (detector, detectability_table(name, detector, files).for_face(face))
     return detectors
 
 

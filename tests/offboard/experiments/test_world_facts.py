@@ -48,6 +48,14 @@ def test_a_position_sees_where_the_measured_rate_is_high_enough():
     assert not _sees(low, (3.0, 4.5))  # behind the picture
 
 
+def test_a_target_half_as_large_is_seen_from_half_as_far():
+    full = Truth((8.0, 6.0, 2.5), (), (4.0, 5.6, 1.2), -90.0)  # at camera height, its picture at y = 5.485
+    half = Truth((8.0, 6.0, 2.5), (), (4.0, 5.6, 1.2), -90.0, target_height_m=0.115, target_width_m=0.115)
+    for truth, sees_far in ((full, True), (half, False)):
+        assert _sees(truth, (4.0, 5.485 - 1.0)) and _sees(truth, (4.0, 5.485 - 3.0)) == sees_far
+    assert _sees(half, (4.0, 5.485 - 1.5))  # as far, by its size, as the full one at 3 m
+
+
 def test_a_high_shelf_target_close_by_is_out_of_the_tilt_range():
     criteria = SeeingCriteria()
     face = HIGH.face_centre(np.array([0.0, -1.0]))

@@ -3,18 +3,23 @@ rendered views, and what the search loads when no table is given."""
 
 from __future__ import annotations
 
-from importlib import resources
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from offboard.perception.detectability import DetectabilityTable
-from offboard.search.run import detectability_table
+from offboard.perception.detectability import DetectabilityTable, face_size_m
+from offboard.perception.detection.detector import shipped_table
+from offboard.perception.detection.target_model import TargetModel
+from offboard.search.run import SearchRequest, build_detectors, detectability_table
+from shared.geometry import Intrinsics
 
 
 def shipped(name: str) -> DetectabilityTable:
-    return DetectabilityTable.load(Path(str(resources.files("offboard.perception.detection") / "tables" / f"{name}.json")))
+    table = shipped_table(name)
+    assert table is not None, f"no table shipped for {name}"
+    return table
 
 
 def _cells(table: DetectabilityTable, near_m: float, far_m: float, max_facing_deg: float) -> tuple[np.ndarray, ...]:
@@ -55,6 +60,40 @@ def test_the_search_loads_the_shipped_table_unless_given_one(tmp_path):
     nominal.save(tmp_path / "mine.json")
     given = detectability_table("sift", _NoDetector(), {"sift": tmp_path / "mine.json"})
     assert np.array_equal(given.rate, nominal.rate)
+
+
+def test_a_table_holds_for_its_face_size_and_a_face_half_as_large_is_found_from_half_as_far():
+    table = shipped("sift")
+    assert table.face_size_m == 0.23  # calibrate-detector's default target
+    half = table.for_face(0.115)
+    distances = np.array([0.6, 1.3, 2.7, 3.9, 4.6])
+    off_axis, facing = np.full(5, 10.0), np.full(5, 25.0)
+    assert np.array_equal(half.lookup(distances / 2, off_axis, facing), table.lookup(distances, off_axis, facing))
+    assert half.lookup(np.array([4.0]), off_axis[:1], facing[:1])[0] < 0.05 < table.lookup(np.array([4.0]), off_axis[:1], facing[:1])[0]
+    assert half.range_m == pytest.approx(tuple(d / 2 for d in table.range_m))
+    assert table.for_face(0.23) is table
+    nominal = DetectabilityTable.nominal()  # of no particular size: it holds for any
+    assert nominal.for_face(0.1) is nominal
+    with pytest.raises(ValueError, match="positive"):
+        table.for_face(0.0)
+
+
+def test_a_table_keeps_its_face_size_on_disk_and_an_older_file_holds_for_any(tmp_path):
+    shipped("sift").for_face(0.3).save(tmp_path / "t.json")
+    assert DetectabilityTable.load(tmp_path / "t.json").face_size_m == 0.3
+    data = json.loads((tmp_path / "t.json").read_text())
+    del data["face_size_m"]
+    (tmp_path / "old.json").write_text(json.dumps(data))
+    assert DetectabilityTable.load(tmp_path / "old.json").face_size_m is None
+
+
+def test_the_search_rescales_the_table_to_its_target():
+    picture = np.random.default_rng(0).integers(0, 255, (120, 120, 3), np.uint8)
+    small = TargetModel((picture,), (0.1, 0.1, 0.16))  # a face 0.1 m wide and 0.16 m high
+    request = SearchRequest(pictures=(), target_size_m=small.size_m)
+    (_, table), = build_detectors("sift", request, small, Intrinsics.from_fov(640, 480, 66.0)).values()
+    assert table.face_size_m == pytest.approx(face_size_m(0.1, 0.16)) == pytest.approx(0.1265, abs=1e-4)
+    assert np.allclose(table.distance_edges_m, shipped("sift").distance_edges_m * table.face_size_m / 0.23)
 
 
 @pytest.mark.parametrize("edges_deg", [np.arange(0.0, 91.0, 10.0), np.linspace(0.0, 45.0, 10), np.arange(20.0, 61.0, 5.0)])
