@@ -150,8 +150,6 @@ def _calibrate(args: argparse.Namespace) -> int:
     import shutil
     import tempfile
 
-    import numpy as np
-
     from offboard.perception import calibration
     from offboard.perception.detectability import face_size_m
     from offboard.perception.detection.detector import make_detector
@@ -171,8 +169,7 @@ def _calibrate(args: argparse.Namespace) -> int:
                 agent.wait_ready(session, "syt")
                 info = robot.wait_for_robot()
                 detector = make_detector(args.detector, model, info.intrinsics.to_intrinsics())
-                face = np.array([calibration.TARGET_XY[0] + args.target_size[0] / 2, calibration.TARGET_XY[1],
-                                 info.mount.height_m])
+                face = calibration.face_centre(args.target_size, info.mount.height_m)
                 tally = calibration.calibrate(robot, detector, grid, face, args.target_size[1], _progress)
     table = calibration.to_table(args.detector, grid, tally, face_size_m(model.face_width_m, model.face_height_m))
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -251,7 +248,7 @@ def _parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--detector", choices=("sift", "ncc"), default="sift")
     calibrate.add_argument("--target-picture", action="append", type=Path, required=True, metavar="PATH")
     calibrate.add_argument("--target-size", type=floats(3, "--target-size", positive=True), default=(0.23, 0.23, 0.23), metavar="X,Y,Z")
-    calibrate.add_argument("--samples", type=int, default=1, help="views per cell")
+    calibrate.add_argument("--samples", type=int, default=5, help="views per cell (the first at its centre, the second mirrored, the rest anywhere in it)")
     calibrate.add_argument("--negatives", type=int, default=200, help="views without the target")
     calibrate.add_argument("--out", type=Path, required=True, metavar="FILE.json")
     calibrate.set_defaults(func=_calibrate)
