@@ -248,7 +248,7 @@ def _parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--detector", choices=("sift", "ncc"), default="sift")
     calibrate.add_argument("--target-picture", action="append", type=Path, required=True, metavar="PATH")
     calibrate.add_argument("--target-size", type=floats(3, "--target-size", positive=True), default=(0.23, 0.23, 0.23), metavar="X,Y,Z")
-    calibrate.add_argument("--samples", type=int, default=5, help="views per cell (the first at its centre, the second mirrored, the rest anywhere in it)")
+    calibrate.add_argument("--samples", type=int, default=1, help="views per cell (the first at its centre, the second mirrored, the rest anywhere in it)")
     calibrate.add_argument("--negatives", type=int, default=200, help="views without the target")
     calibrate.add_argument("--out", type=Path, required=True, metavar="FILE.json")
     calibrate.set_defaults(func=_calibrate)

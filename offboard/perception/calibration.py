@@ -37,7 +37,7 @@ class CalibrationGrid:
     distance_edges_m: tuple[float, ...] = tuple(np.round(np.arange(0.25, 6.01, 0.25), 3))
     off_axis_edges_deg: tuple[float, ...] = (0.0, 7.0, 14.0, 21.0, 28.0, 35.0)
     facing_edges_deg: tuple[float, ...] = tuple(float(v) for v in range(0, 91, 10))
-    samples: int = 5  # views per cell (each with the opposite sign of the angles from the last; see view_angles)
+    samples: int = 1  # views per cell (each with the opposite sign of the angles from the last; see view_angles)
     negatives: int = 200  # views without the target
 
 
@@ -142,24 +142,27 @@ def to_table(name: str, grid: CalibrationGrid, tally: Tally, face_size_m: float)
 
 
 def pooled_rate(hits: np.ndarray, views: np.ndarray) -> np.ndarray:
-    """Detection rate per cell from its views and those of its neighbours in distance and off-axis
-    angle (the 3 × 3 cells around it at the same facing angle), counting one miss more than seen:
-    hits / (views + 1). So no cell claims certainty (which would let one look rule a place out for
-    good) and thinly measured cells lean towards "not detected" (the planner then looks again
-    rather than trusting a look that may not work). Cells with no view around them get 0.
+    """Detection rate per cell from its views and its neighbours' (the 3 × 3 × 3 cells around it:
+    one view a cell says little), counting one miss more than seen: hits / (views + 1). So no cell
+    claims certainty (which would let one look rule a place out for good) and thinly measured cells
+    lean towards "not detected" (the planner then looks again rather than trusting a look that may
+    not work). Cells with no view around them get 0.
 
-    Detection varies smoothly with distance and off-axis angle but falls off a cliff with the facing
-    angle (SIFT at 1-2 m: every view up to 60°, 0.84 at 60-70°, none beyond). Pooled across facing
-    bins as well, the 70-80° bin borrowed 0.3 from its neighbour, and a miss there ruled out a third
-    of a place the detector could not see. Predicting each cell of a 5-view calibration from its
-    neighbours alone, the 3 × 3 neighbours give log loss 0.171, the 3 × 3 × 3 ones 0.186."""
-    return _box_sum(hits.astype(float)) / (_box_sum(views.astype(float)) + 1.0)
+    Pooling across facing angles blurs a cliff: SIFT finds the picture in nearly every view up to
+    60° off its normal and almost never beyond 70° (at 1-2 m, 0.83 of views at 60-70°, 0.06 at
+    70-80°), and the pooled 70-80° bin borrows about 0.3 from its neighbour. Predicting each cell of
+    a 5-view calibration from its neighbours alone (:func:`held_out_log_loss`), the 3 × 3 cells in
+    distance and off-axis angle do better than these 27: 0.192 against 0.203. The table pooled that
+    way searched a little worse on the `dev` suite, as every truer table tried has
+    (docs/search-experiments.md, "What a look says"), so the shipped tables keep this pooling."""
+    return _box_sum(hits.astype(float), across_facing=True) / (_box_sum(views.astype(float), across_facing=True) + 1.0)
 
 
 def held_out_log_loss(hits: np.ndarray, views: np.ndarray, across_facing: bool = False) -> float:
     """How well a cell's neighbours predict it: the log loss over every view of each cell, its rate
-    pooled as :func:`pooled_rate` does but from the neighbours alone (``across_facing``: from the
-    3 × 3 × 3 cells around it). Rates are clipped to [0.02, 0.98]."""
+    pooled from the 3 × 3 cells around it in distance and off-axis angle (``across_facing``: the
+    3 × 3 × 3 cells, as :func:`pooled_rate` pools), leaving the cell's own views out. Rates are
+    clipped to [0.02, 0.98]."""
     hits, views = hits.astype(float), views.astype(float)
     around_hits = _box_sum(hits, across_facing) - hits
     rate = np.clip(around_hits / (_box_sum(views, across_facing) - views + 1.0), 0.02, 0.98)

@@ -16,13 +16,13 @@ from offboard.perception.detection.target_model import TargetModel
 from conftest import running_agent
 
 
-def test_a_rate_pools_its_neighbours_in_distance_and_off_axis_angle_but_not_across_facing_angles():
-    hits, views = np.zeros((4, 4, 2)), np.ones((4, 4, 2))
-    hits[:, :, 0] = 1  # every view up to some facing angle found the target, none beyond
+def test_a_rate_pools_the_cells_around_it_and_counts_one_miss_more_than_seen():
+    hits, views = np.zeros((4, 4, 4)), np.ones((4, 4, 4))
+    hits[:, :, :2] = 1  # every view up to some facing angle found the target, none beyond
     rate = pooled_rate(hits, views)
-    assert np.all(rate[:, :, 1] == 0.0)  # not a share borrowed from the bin next door
-    assert rate[1, 1, 0] == pytest.approx(9 / 10)  # 3 × 3 views around it, one miss more than seen
-    assert rate[0, 0, 0] == pytest.approx(4 / 5)  # a corner has fewer neighbours
+    assert rate[1, 1, 1] == pytest.approx(18 / 28)  # 27 views around it, 18 of them hits, one miss more
+    assert rate[1, 1, 2] == pytest.approx(9 / 28) and rate[1, 1, 3] == 0.0  # the next bin borrows across the edge
+    assert rate[0, 0, 0] == pytest.approx(8 / 9)  # a corner has fewer neighbours
 
 
 def test_a_cells_views_are_its_centre_mirrored_then_spread_over_it():
@@ -57,7 +57,8 @@ def test_a_small_calibration_on_a_simulated_robot_finds_the_target_head_on_and_n
     assert tally.views.tolist() == [[[3, 3, 3]]] and tally.negative_views == 2
     assert tally.hits[0, 0, 0] == 3 and tally.hits[0, 0, 2] == 0  # head-on at 1-1.5 m; from behind (80-120°)
     table = calibration.to_table("sift", grid, tally, 0.23)
-    assert table.face_size_m == 0.23 and table.rate[0, 0, 0] == pytest.approx(3 / 4)
+    assert table.face_size_m == 0.23
+    assert table.rate[0, 0, 0] == pytest.approx((3 + tally.hits[0, 0, 1]) / 7)  # with its facing neighbour's views
 
 
 def test_neighbours_across_a_cliff_in_facing_angle_predict_a_cell_worse_than_those_beside_it():
