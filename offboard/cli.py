@@ -151,7 +151,6 @@ def _calibrate(args: argparse.Namespace) -> int:
     import tempfile
 
     from offboard.perception import calibration
-    from offboard.perception.detectability import face_size_m
     from offboard.perception.detection.detector import make_detector
     from offboard.perception.detection.target_model import TargetModel
     from offboard.robot.robot_client import RobotClient
@@ -171,7 +170,7 @@ def _calibrate(args: argparse.Namespace) -> int:
                 detector = make_detector(args.detector, model, info.intrinsics.to_intrinsics())
                 face = calibration.face_centre(args.target_size, info.mount.height_m)
                 tally = calibration.calibrate(robot, detector, grid, face, args.target_size[1], _progress)
-    table = calibration.to_table(args.detector, grid, tally, face_size_m(model.face_width_m, model.face_height_m))
+    table = calibration.to_table(args.detector, grid, tally, model.face_size_m)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     table.save(args.out)
     sys.stderr.write("\n")

@@ -180,7 +180,7 @@ def _box_sum(values: np.ndarray, across_facing: bool = False) -> np.ndarray:
 
 
 def view_angles(grid: CalibrationGrid, index: tuple[int, int, int], centre: tuple[float, float, float],
-                   sample: int, rng: np.random.Generator) -> tuple[float, float, float]:
+                sample: int, rng: np.random.Generator) -> tuple[float, float, float]:
     """Distance and signed angles of a cell's ``sample``-th view: its centre, then the centre mirrored,
     then anywhere in the cell, mirrored every other time. The simulator renders a view exactly again,
     so a third view from the centre would repeat the first, not measure anything new."""

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from offboard.planning import priors
-from offboard.perception.detectability import DetectabilityTable, face_size_m
+from offboard.perception.detectability import DetectabilityTable
 from offboard.perception.detection.detector import Detector, make_detector, shipped_table
 from offboard.perception.detection.target_model import TargetModel
 from offboard.search.recording import Recorder
@@ -79,7 +79,7 @@ def detectability_table(name: str, detector: Detector, files: dict[str, Path]) -
     else a nominal one over the detector's own range."""
     if name in files:
         return DetectabilityTable.load(files[name])
-    if shipped := shipped_table(name):
+    if (shipped := shipped_table(name)) is not None:
         return shipped
     near, far = detector.range_m
     log.warning("no measured detectability table for %s: using a nominal one over %.2f-%.2f m", name, near, far)
@@ -91,11 +91,10 @@ def build_detectors(detector: str, request: SearchRequest, model: TargetModel, i
     target's size."""
     files = dict(_name_file(spec) for spec in request.detectability)
     names = ("sift", "ncc") if detector == "auto" else (detector,)
-    face = face_size_m(model.face_width_m, model.face_height_m)
     detectors = {}
     for name in names:
         detector = make_detector(name, model, intrinsics)
-        detectors[name] = (detector, detectability_table(name, detector, files).for_face(face))
+        detectors[name] = (detector, detectability_table(name, detector, files).for_face(model.face_size_m))
     return detectors
 
 

@@ -18,6 +18,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from offboard.perception.detectability import face_size_m
+
 
 MIN_PICTURE_PX = 16  # a smaller picture holds too little texture for either detector
 
@@ -54,6 +56,11 @@ class TargetModel:
     @property
     def face_height_m(self) -> float:
         return self.size_m[2]
+
+    @property
+    def face_size_m(self) -> float:
+        """The size a detectability table scales with (:func:`~offboard.perception.detectability.face_size_m`)."""
+        return face_size_m(self.face_width_m, self.face_height_m)
 
 
 def _check_picture(picture: np.ndarray, label: str) -> None:

@@ -92,7 +92,7 @@ def test_the_search_rescales_the_table_to_its_target():
     small = TargetModel((picture,), (0.1, 0.1, 0.16))  # a face 0.1 m wide and 0.16 m high
     request = SearchRequest(pictures=(), target_size_m=small.size_m)
     (_, table), = build_detectors("sift", request, small, Intrinsics.from_fov(640, 480, 66.0)).values()
-    assert table.face_size_m == pytest.approx(face_size_m(0.1, 0.16)) == pytest.approx(0.1265, abs=1e-4)
+    assert table.face_size_m == face_size_m(0.1, 0.16) == pytest.approx(0.1265, abs=1e-4)
     assert np.allclose(table.distance_edges_m, shipped("sift").distance_edges_m * table.face_size_m / 0.23)
 
 
