@@ -154,8 +154,9 @@ def pooled_rate(hits: np.ndarray, views: np.ndarray) -> np.ndarray:
     a 5-view calibration from its neighbours alone (:func:`held_out_log_loss`), the 3 × 3 cells in
     distance and off-axis angle do better than these 27: 0.192 against 0.203. With one view a cell,
     as the shipped tables were measured, nine views are too few and these 27 do better (0.186
-    against 0.197). The 5-view table pooled the first way searched a little worse on the `dev` suite, as every truer table tried has
-    (docs/search-experiments.md, "What a look says"), so the shipped tables keep this pooling."""
+    against 0.197). The 5-view table pooled the first way searched a little worse on the `dev`
+    suite, as every truer table tried has (docs/search-experiments.md, "What a look says"), so the
+    shipped tables keep this pooling."""
     return _box_sum(hits.astype(float), across_facing=True) / (_box_sum(views.astype(float), across_facing=True) + 1.0)
 
 
