@@ -14,12 +14,11 @@ import logging
 import math
 import tempfile
 import time
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-from offboard.perception.detectability import DetectabilityTable
+from offboard.perception.detection.detector import shipped_table
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.voxel_grid import VoxelGrid
 from offboard.planning.belief import TargetBelief
@@ -43,7 +42,7 @@ def realistic_state(looks: int = LOOKS, seed: int = 0) -> tuple[TargetBelief, Oc
     grid = VoxelGrid(ROOM_M, 0.05)
     occupancy = OccupancyGrid(grid)
     belief = TargetBelief(grid, facing_sectors=8, prob_outside=0.05, coarse_factor=4)
-    table = DetectabilityTable.load(Path(str(resources.files("offboard.perception.detection") / "tables" / "sift.json")))
+    table = shipped_table("sift")
     rng = np.random.default_rng(seed)
     config = SearchConfig()
     for _ in range(looks):

@@ -96,7 +96,8 @@ class SeeingCriteria:
     off the picture's normal) is at least ``min_rate``, the whole picture fits in the image, and no
     obstacle crosses the lines from the camera to the picture's centre and corners. The range, the nearest distance
     and the widest angle off the normal follow from the table (:attr:`range_m`, :attr:`near_m`,
-    :attr:`max_off_normal_deg`)."""
+    :attr:`max_off_normal_deg`). The table is for the face size it was measured with;
+    :func:`seeing_cells` rescales it to the target's (direct callers of :meth:`rate` must too)."""
 
     table: DetectabilityTable = field(default_factory=detector_table, compare=False)
     min_rate: float = field(default=0.8, metadata=bounds(0.0, 1.0))  # "the detector reliably finds it"

@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import argparse
 import math
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from offboard.experiments import harness as experiment
 from offboard.experiments.baselines import BaselineContext
-from offboard.experiments.world_facts import (ARRIVAL_MARGIN_M, Obstacle, SeeingCriteria, Truth, detector_table,
+from offboard.experiments.world_facts import (ARRIVAL_MARGIN_M, Obstacle, SeeingCriteria, Truth,
                                               load_facts, seeing_cells, tables_hints, target_placements,
                                               true_floor_map, viewpoint)
 from offboard.perception.detectability import DetectabilityTable
@@ -33,7 +35,8 @@ def test_the_criteria_are_read_from_the_detectors_table():
     assert (criteria.near_m, criteria.range_m, criteria.max_off_normal_deg) == (0.5, 2.25, 40.0)
     assert SeeingCriteria(table=table, min_rate=0.9).range_m < criteria.range_m  # stricter: nearer
     shipped = SeeingCriteria()  # the SIFT table the searches load, not hard-coded numbers
-    assert shipped.table.detector == "sift" and np.array_equal(shipped.table.rate, detector_table("sift").rate)
+    on_disk = DetectabilityTable.load(Path(str(resources.files("offboard.perception.detection") / "tables" / "sift.json")))
+    assert shipped.table.detector == "sift" and np.array_equal(shipped.table.rate, on_disk.rate)
     assert shipped.range_m > 3.0 and 0 < shipped.max_off_normal_deg <= 60.0
 
 

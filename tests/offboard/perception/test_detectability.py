@@ -4,6 +4,7 @@ rendered views, and what the search loads when no table is given."""
 from __future__ import annotations
 
 import json
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -55,7 +56,8 @@ class _NoDetector:
 
 
 def test_the_search_loads_the_shipped_table_unless_given_one(tmp_path):
-    assert np.array_equal(detectability_table("sift", _NoDetector(), {}).rate, shipped("sift").rate)
+    on_disk = DetectabilityTable.load(Path(str(resources.files("offboard.perception.detection") / "tables" / "sift.json")))
+    assert np.array_equal(detectability_table("sift", _NoDetector(), {}).rate, on_disk.rate)
     nominal = DetectabilityTable.nominal("sift")
     nominal.save(tmp_path / "mine.json")
     given = detectability_table("sift", _NoDetector(), {"sift": tmp_path / "mine.json"})
@@ -89,7 +91,7 @@ def test_a_table_keeps_its_face_size_on_disk_and_an_older_file_holds_for_any(tmp
 
 def test_the_search_rescales_the_table_to_its_target():
     picture = np.random.default_rng(0).integers(0, 255, (120, 120, 3), np.uint8)
-    small = TargetModel((picture,), (0.1, 0.1, 0.16))  # a face 0.1 m wide and 0.16 m high
+    small = TargetModel((picture,), (0.3, 0.1, 0.16))  # 0.3 m deep, its face 0.1 m wide and 0.16 m high
     request = SearchRequest(pictures=(), target_size_m=small.size_m)
     (_, table), = build_detectors("sift", request, small, Intrinsics.from_fov(640, 480, 66.0)).values()
     assert table.face_size_m == face_size_m(0.1, 0.16) == pytest.approx(0.1265, abs=1e-4)

@@ -64,6 +64,6 @@ def test_a_small_calibration_on_a_simulated_robot_finds_the_target_head_on_and_n
 def test_neighbours_across_a_cliff_in_facing_angle_predict_a_cell_worse_than_those_beside_it():
     hits, views = np.zeros((4, 4, 3)), np.full((4, 4, 3), 2.0)
     hits[:, :, 0] = 2  # seen head-on every time, never from the side
-    beside = calibration.held_out_log_loss(hits, views)
-    across = calibration.held_out_log_loss(hits, views, across_facing=True)
+    beside = calibration.held_out_log_loss(hits, views, across_facing=False)
+    across = calibration.held_out_log_loss(hits, views)
     assert beside < 0.1 < 0.2 < across  # pooled across the cliff, the 1st facing bin borrows a third of the 0th's rate
