@@ -8,9 +8,10 @@ gives for the target's picture as that camera truly saw it, against whether the 
 A look has the picture *in view* when its centre and corners project into the image and no obstacle
 crosses the lines to them; its *table rate* is then the table's at the picture's distance, its angle
 off the optical axis and the camera's angle off the picture's normal. Looks with a rate of at least
-0.05 are binned by it, each view of a run once (:func:`target_views`). Eq. 4 treats every look as a fresh draw, so a look that follows a miss in
-view should find the target as often as the table says; the last columns test that, splitting each
-bin into a run's looks before and after its first miss in view. The same looks are grouped by
+0.05 are binned by it, each view of a run once (:func:`target_views`). Eq. 4 treats every look as a
+fresh draw, so a look that follows a miss in view should find the target as often as the table says;
+the last columns test that, splitting each bin into a run's looks before and after its first miss in
+view. The same looks are grouped by
 distance and by angle off the normal too: a table measured in another scene errs first there.
 
 The check assumes the simulator's default camera and head (:data:`SIM_CAMERA`, :data:`SIM_MOUNT`),
@@ -109,7 +110,8 @@ class ViewGroup:
         return sum(v.view.rate for v in self.looks) / len(self.looks) if self.looks else None
 
 
-Run = tuple[Truth, list[Look], DetectabilityTable]  # the true room and target, the looks, the run's detector's table for that target
+# the true room and target, the looks, and the run's detector's table for that target's size
+Run = tuple[Truth, list[Look], DetectabilityTable]
 
 
 def target_views(runs: list[Run]) -> tuple[list[ViewedLook], int, int]:
