@@ -16,10 +16,11 @@ pytestmark = pytest.mark.integration
 
 PLANNER = textwrap.dedent("""
     import signal, sys, time
+    from pathlib import Path
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # as in a shell's background job: the agent inherits it
     from shared.launch import onboard_agent
     from shared.transport import TransportConfig
-    with onboard_agent(["--backend", "sim", "--world", "paper-lab"], None) as agent:
+    with onboard_agent(["--backend", "sim", "--world", "paper-lab"], Path(sys.argv[2])) as agent:
         if sys.argv[1] == "serving":  # else still starting: importing, loading, compiling, no handlers yet
             with TransportConfig(connect=(agent.endpoint,), multicast_scouting=False).open() as session:
                 agent.wait_ready(session, "syt")
@@ -39,8 +40,10 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the parent-death signal is Linux's")
 @pytest.mark.parametrize("agent_is", ["starting", "serving"])
-def test_the_agent_stops_when_its_planner_is_killed_outright(agent_is):
-    planner = subprocess.Popen([sys.executable, "-c", PLANNER, agent_is], stdout=subprocess.PIPE, text=True)
+def test_the_agent_stops_when_its_planner_is_killed_outright(agent_is, tmp_path):
+    agent_log = tmp_path / "agent.log"
+    planner = subprocess.Popen([sys.executable, "-c", PLANNER, agent_is, str(agent_log)], stdout=subprocess.PIPE,
+                               text=True)
     line = planner.stdout.readline()
     assert line, "the planner did not start its agent"
     agent_pid = int(line)
@@ -48,7 +51,8 @@ def test_the_agent_stops_when_its_planner_is_killed_outright(agent_is):
         assert _alive(agent_pid)
         planner.send_signal(signal.SIGKILL)  # no finally block runs: only the kernel can tell the agent
         planner.wait()
-        assert wait_until(lambda: not _alive(agent_pid), 15.0), "the agent outlived its planner"
+        assert wait_until(lambda: not _alive(agent_pid), 15.0), \
+            f"the agent outlived its planner; its log ends:\n{agent_log.read_text()[-3000:]}"
     finally:
         planner.kill()
         if _alive(agent_pid):  # leave no robot behind, even when the test fails
