@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from importlib import resources
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +15,7 @@ from offboard.experiments.world_facts import (ARRIVAL_MARGIN_M, Obstacle, Seeing
                                               load_facts, seeing_cells, tables_hints, target_placements,
                                               true_floor_map, viewpoint)
 from offboard.perception.detectability import DetectabilityTable
+from offboard.perception.detection.detector import shipped_table
 
 # a 6 × 5 m room; a 2.1 m shelf against the north wall with the target on top, its picture facing the room
 SHELF = Obstacle((2.5, 4.69, 0.0), (3.5, 5.0, 1.9))  # the picture 5 mm in front of its edge
@@ -35,7 +34,7 @@ def test_the_criteria_are_read_from_the_detectors_table():
     assert (criteria.near_m, criteria.range_m, criteria.max_off_normal_deg) == (0.5, 2.25, 40.0)
     assert SeeingCriteria(table=table, min_rate=0.9).range_m < criteria.range_m  # stricter: nearer
     shipped = SeeingCriteria()  # the SIFT table the searches load, not hard-coded numbers
-    on_disk = DetectabilityTable.load(Path(str(resources.files("offboard.perception.detection") / "tables" / "sift.json")))
+    on_disk = shipped_table.__wrapped__("sift")  # uncached: read from the file again
     assert shipped.table.detector == "sift" and np.array_equal(shipped.table.rate, on_disk.rate)
     assert shipped.range_m > 3.0 and 0 < shipped.max_off_normal_deg <= 60.0
 
