@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import msgpack
 import zenoh
 
+from onboard import signals
 from onboard.config import OnboardConfig
 from onboard.devices import Devices, SimControl
 from onboard.hardware.fault import DeviceFault
@@ -131,7 +132,7 @@ class Agent:
                 self._threads.append(thread)
             log.info("agent ready: robot %r, backend %s, keys under syt/%s/", self.keys.robot_id,
                      self.devices.backend, self.keys.robot_id)
-            stop.wait()
+            signals.wait(stop)
         finally:
             self._close()
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import ctypes
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -15,7 +17,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from conftest import client_transport, running_agent
+from conftest import client_transport, running_agent, wait_until
 from offboard.robot.robot_client import CommandError
 from shared import messages as m
 from shared.codec import decode, encode
@@ -267,3 +269,16 @@ def test_a_command_right_after_a_motion_reply_is_not_refused_as_busy(sim_agent):
         robot.move(turn_deg=-10.0)
         robot.look(5.0, 0.0)
         robot.look(0.0, 0.0)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="tgkill(2) is Linux's")
+def test_a_sigterm_that_lands_on_another_thread_still_stops_the_agent(tmp_path):
+    """The kernel may hand a process's SIGTERM (its planner's death signal, a ``kill``) to any of its
+    threads; here, to one that is not the main thread, which alone runs Python's handlers."""
+    tgkill = ctypes.CDLL(None, use_errno=True).tgkill
+    with running_agent(tmp_path, "--world", "paper-lab") as (agent, _):
+        pid = agent.process.pid
+        other = min(int(tid) for tid in os.listdir(f"/proc/{pid}/task") if int(tid) != pid)
+        assert tgkill(pid, other, signal.SIGTERM) == 0
+        assert wait_until(lambda: agent.process.poll() is not None, 5.0), "the agent went on serving"
+    assert agent.process.returncode == 0 and "agent stopped" in agent.log_path.read_text()
