@@ -24,6 +24,13 @@ log = logging.getLogger(__name__)
 # must notice a lost planner quickly, since its watchdog acts on the liveliness token.
 DEFAULT_LEASE_MS = 2000
 _LEASE = "transport/link/tx/lease"
+# Sessions connect where they are told to (listen, connect) or by multicast scouting, not to every
+# peer gossip names: with Zenoh's default the agent kept dialling each short-lived observer's
+# addresses after it had left (6,482 attempts for 400 observers), and beside three busy loops a
+# planner's query went unanswered for 5 s, observers' queries reached nobody, and a close timed out.
+# With autoconnect off, none of that in 1,100 observers, nor any dialling.
+# Gossip itself stays on (Zenoh warns without it). A file that sets any gossip setting keeps its own.
+_GOSSIP = "scouting/gossip"
 
 
 @dataclass(frozen=True)
@@ -54,11 +61,14 @@ class TransportConfig:
         return config
 
     def _flag_settings(self, config: zenoh.Config) -> dict:
-        """The flags that were given, plus the project's lease where the file keeps Zenoh's (10 s)."""
+        """The flags that were given, plus the project's lease and gossip where the file keeps Zenoh's."""
+        zenohs = zenoh.Config()
         lease = self.lease_ms
-        if lease is None and config.get_json(_LEASE) == zenoh.Config().get_json(_LEASE):
+        if lease is None and config.get_json(_LEASE) == zenohs.get_json(_LEASE):
             lease = DEFAULT_LEASE_MS
+        gossip = {"router": [], "peer": []} if config.get_json(_GOSSIP) == zenohs.get_json(_GOSSIP) else None
         settings = {"mode": self.mode, "scouting/multicast/enabled": self.multicast_scouting, _LEASE: lease,
+                    f"{_GOSSIP}/autoconnect": gossip,
                     "connect/endpoints": list(self.connect) or None, "listen/endpoints": list(self.listen) or None}
         return {key: value for key, value in settings.items() if value is not None}
 

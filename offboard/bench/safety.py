@@ -174,8 +174,7 @@ class Observer:
 
 
 def observer_transport(agent: LoopbackAgent) -> TransportConfig:
-    return TransportConfig(connect=(agent.endpoint,), multicast_scouting=False,
-                           extra={"scouting/gossip/enabled": False})
+    return TransportConfig(connect=(agent.endpoint,), multicast_scouting=False)
 
 
 # --- one trial -------------------------------------------------------------------------------------

@@ -41,8 +41,7 @@ def _say(word: str) -> None:
 
 def run_planner(endpoint: str, mode: str, lease_ms: int) -> None:
     """Hold a planner's token, heartbeat, and drive until killed, frozen or cut off."""
-    transport = TransportConfig(connect=(endpoint,), mode=mode, multicast_scouting=False, lease_ms=lease_ms,
-                                extra={"scouting/gossip/enabled": False})
+    transport = TransportConfig(connect=(endpoint,), mode=mode, multicast_scouting=False, lease_ms=lease_ms)
     with transport.open() as session, RobotClient(session, transport.robot_id) as robot:
         robot.wait_for_robot(30.0)
         _say("ready")
@@ -70,7 +69,7 @@ def run_router(listen: str, agent: str, lease_ms: int) -> None:
 
 def run_load(endpoint: str, seconds: float) -> None:
     """Query ``state`` back to back for ``seconds``; print the replies and the errors as JSON."""
-    transport = TransportConfig(connect=(endpoint,), multicast_scouting=False, extra={"scouting/gossip/enabled": False})
+    transport = TransportConfig(connect=(endpoint,), multicast_scouting=False)
     keys = RobotKeys(transport.robot_id)
     replies = errors = 0
     with transport.open() as session:

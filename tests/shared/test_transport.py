@@ -44,3 +44,11 @@ def test_without_a_file_the_lease_is_the_projects_and_zenoh_keeps_its_defaults()
     assert json.loads(config.get_json("transport/link/tx/lease")) == DEFAULT_LEASE_MS
     assert config.get_json("mode") == "null"  # Zenoh's default: peer
     assert json.loads(TransportConfig(multicast_scouting=False).zenoh().get_json("scouting/multicast/enabled")) is False
+
+
+def test_gossip_connects_nobody_unless_the_file_configures_it(tmp_path):
+    autoconnect = "scouting/gossip/autoconnect"
+    assert json.loads(TransportConfig().zenoh().get_json(autoconnect)) == {"router": [], "peer": []}
+    path = tmp_path / "gossip.json5"
+    path.write_text("{ scouting: { gossip: { multihop: true } } }")
+    assert json.loads(TransportConfig(zenoh_config=path).zenoh().get_json(autoconnect)) is None  # Zenoh's default
