@@ -22,8 +22,8 @@ import math
 import sys
 from pathlib import Path
 
+from onboard import signals
 from onboard.config import OnboardConfig
-from onboard.signals import stop_on_signals, wait
 from shared.arguments import floats
 from shared.config import ConfigError, load_config
 from shared.transport import add_transport_args, transport_from_args
@@ -94,7 +94,7 @@ def run_agent(argv: list[str]) -> int:
     except (DeviceFault, CalibrationFileError, WorldError) as exc:
         log.error("cannot start the %s backend: %s", config.backend, exc)
         return 1
-    stop = stop_on_signals()
+    stop = signals.stop_on_signals()
     from onboard.secure_transport import warn_if_exposed
     from onboard.zenoh_log import route_zenoh_log
 
@@ -281,11 +281,11 @@ def run_emulate(argv: list[str]) -> int:
     except (ConfigError, WorldError) as exc:
         log.error("%s", exc)
         return 2
-    stop = stop_on_signals()
+    stop = signals.stop_on_signals()
     with EmulatedRobot(config, world, args.world or config.sim.world) as robot:
         sys.stdout.write(json.dumps(robot.ports()) + "\n")
         sys.stdout.flush()
-        wait(stop)
+        signals.wait(stop)
     return 0
 
 
