@@ -24,7 +24,7 @@ from offboard.perception.voxel_grid import VoxelGrid
 from offboard.planning.belief import TargetBelief
 from offboard.planning.detection_function import look_footprint, visible_depth
 from offboard.search import checkpoint
-from offboard.search.loop import SearchConfig, seen_empty
+from offboard.search.loop import SearchConfig, fold_in_map
 from offboard.search.run import SearchRequest
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 from shared.transport import TransportConfig
@@ -35,6 +35,7 @@ ROOM_M = (9.0, 5.0, 2.5)
 K = Intrinsics.from_fov(640, 480, 66.0)
 MOUNT = HeadMount()
 LOOKS = 10
+TARGET_M = 0.23  # the target's edge: the request's size, and its depth for the map's rule-outs
 
 
 def realistic_state(looks: int = LOOKS, seed: int = 0) -> tuple[TargetBelief, OccupancyGrid]:
@@ -55,7 +56,7 @@ def realistic_state(looks: int = LOOKS, seed: int = 0) -> tuple[TargetBelief, Oc
         seen = visible_depth(disparity, occupancy, camera, K, MOUNT.baseline_m, 16, table.range_m[1])
         footprint = look_footprint(grid, camera, K, seen, 16, table, belief.facing_azimuths_rad, 0.12)
         belief.update_after_miss(footprint.cube_index, footprint.detection_prob)
-        belief.rule_out_empty(seen_empty(occupancy, config), config.empty_factor)  # as the search does after every look
+        fold_in_map(belief, occupancy, config, TARGET_M)  # as the search does after every look
     return belief, occupancy
 
 
@@ -63,7 +64,7 @@ def _plain_parts(looks: int) -> dict:
     """The header's plain parts, the size of a real search's after ``looks`` looks."""
     log_entry = {"action": 1, "expected_p": 0.111406, "realised_p": 0.112968, "detected": False,
                  "processing_s": 1.0667, "motion_s": 0.5651, "x_m": 1.7, "y_m": 3.3, "setting": 2}
-    request = SearchRequest(pictures=(Path("target.png"),), target_size_m=(0.23, 0.23, 0.23), room_m=ROOM_M)
+    request = SearchRequest(pictures=(Path("target.png"),), target_size_m=(TARGET_M,) * 3, room_m=ROOM_M)
     search = {"state": {"actions": looks, "look_log": [log_entry] * looks, "planning_ms": [400.0] * looks,
                         "trail": [[1.0, 2.0]] * looks}}
     return {"request": checkpoint.request_plain(request), "transport": checkpoint.transport_plain(TransportConfig()),
@@ -91,9 +92,9 @@ def run(writes: int = 15, looks: int = LOOKS) -> dict:
         state, odds, observed = checkpoint.decode_maps(checkpoint.read(Path(tmp)))
         read_ms = (time.perf_counter() - started) * 1000.0
     saved = belief.state()
-    exact = all(np.array_equal(state[k], saved[k]) for k in ("mass", "coarse", "seen_empty")) and \
+    exact = all(np.array_equal(state[k], saved[k]) for k in ("mass", "coarse", "seen_empty", "facing_blocked")) and \
         np.array_equal(odds, occupancy.log_odds) and np.array_equal(observed, occupancy.observed)
-    raw = sum(saved[k].nbytes for k in ("mass", "coarse", "seen_empty")) + occupancy.log_odds.nbytes + \
+    raw = sum(saved[k].nbytes for k in ("mass", "coarse", "seen_empty", "facing_blocked")) + occupancy.log_odds.nbytes + \
         occupancy.observed.nbytes
     return {
         "checkpoint_write_ms": round(float(np.median(write_ms)), 1),

@@ -17,6 +17,10 @@ surface) cannot hold the target's centre, whichever way the target faces. :meth:
 folds that in once per cube, with a likelihood ``empty_factor`` > 0 for stereo's mistakes; which
 cubes count as empty is the occupancy map's :meth:`~offboard.perception.occupancy.OccupancyGrid.seen_empty`.
 
+The map also says which way a picture can face: not into a surface just in front of it.
+:meth:`exclude_facings_into_walls` applies this to the room's walls at the start, and
+:meth:`rule_out_blocked_facings` to each surface as the map finds it, once per cube and facing.
+
 Masses are stored scaled (``stored × scale`` is the probability) so that the normalisation of eq. 4
 costs one scalar instead of a pass over every cube. The planner also reads a coarse copy (cubes
 summed into ``coarse_factor``³ blocks) kept up to date by the same update.
@@ -43,6 +47,8 @@ class TargetBelief:
         self.coarse_shape = tuple(-(-n // coarse_factor) for n in grid.shape)
         self._mass = np.zeros((*grid.shape, facing_sectors), np.float32)
         self._seen_empty = np.zeros(grid.shape, np.bool_)
+        self._facing_blocked = np.zeros((*grid.shape, facing_sectors), np.bool_)
+        self._solid_done = np.zeros(grid.shape, np.bool_)  # a cache: the solid cubes already folded in
         self._coarse = np.zeros((*self.coarse_shape, facing_sectors), np.float64)
         self.success_prob = 0.0  # P[F], eq. 2
         self.set_prior(np.ones(grid.shape), prob_outside)
@@ -167,18 +173,22 @@ class TargetBelief:
     def state(self) -> dict:
         """Everything the belief holds (arrays not copied): :meth:`restore` of it is this belief, bit
         for bit. The coarse copy is kept: updated incrementally, it differs from a rebuilt one."""
-        return {"mass": self._mass, "coarse": self._coarse, "seen_empty": self._seen_empty, "outside": self._outside,
-                "scale": self._scale, "stored_total": self._stored_total, "success_prob": self.success_prob}
+        return {"mass": self._mass, "coarse": self._coarse, "seen_empty": self._seen_empty,
+                "facing_blocked": self._facing_blocked, "outside": self._outside, "scale": self._scale,
+                "stored_total": self._stored_total, "success_prob": self.success_prob}
 
     def restore(self, state: dict) -> None:
         """Take back a :meth:`state` of a belief over the same grid, sectors and coarse factor."""
-        for name, own in (("mass", self._mass), ("coarse", self._coarse), ("seen_empty", self._seen_empty)):
+        for name, own in (("mass", self._mass), ("coarse", self._coarse), ("seen_empty", self._seen_empty),
+                          ("facing_blocked", self._facing_blocked)):
             given = np.asarray(state[name])
             if given.shape != own.shape or given.dtype != own.dtype:
                 raise ValueError(f"belief {name}: expected {own.dtype} {own.shape}, got {given.dtype} {given.shape}")
         self._mass[:] = state["mass"]
         self._coarse[:] = state["coarse"]
         self._seen_empty[:] = state["seen_empty"]
+        self._facing_blocked[:] = state["facing_blocked"]
+        self._solid_done[:] = False  # the next rule_out_blocked_facings goes over every solid cube again
         self._outside, self._scale = float(state["outside"]), float(state["scale"])
         self._stored_total, self.success_prob = float(state["stored_total"]), float(state["success_prob"])
 
@@ -191,6 +201,41 @@ class TargetBelief:
         if not len(new):
             return 0.0
         return self.observe(new, np.full((len(new), self.facing_sectors), empty_factor, np.float32))
+
+    def rule_out_blocked_facings(self, solid: np.ndarray, near_m: float, far_m: float, factor: float) -> float:
+        """A picture faces open space: a facing with a ``solid`` cube (grid-shaped bool, the mapped
+        surfaces) between ``near_m`` and ``far_m`` in front of a cube's centre keeps only ``factor`` of
+        its mass; each (cube, facing) once. :meth:`exclude_facings_into_walls` does this for the room's
+        walls at the start; this does it for what the map finds. Returns the probability that left."""
+        if self.facing_sectors == 1:
+            return 0.0
+        sectors, (nx, ny, nz) = self.facing_sectors, self.grid.shape
+        solid_cube = np.flatnonzero(solid & ~self._solid_done)  # a cube solid before blocked its facings then
+        self._solid_done.flat[solid_cube] = True
+        i, j = solid_cube // (ny * nz), (solid_cube // nz) % ny
+        pairs = []  # (cube × sectors + sector) of every facing that has a solid cube ahead
+        for s, (dx, dy) in self._facing_steps(near_m, far_m):
+            ahead = (i >= dx) & (i - dx < nx) & (j >= dy) & (j - dy < ny)
+            pairs.append((solid_cube[ahead] - (dx * ny + dy) * nz) * sectors + s)
+        pairs = np.concatenate(pairs) if pairs else np.zeros(0, np.int64)
+        blocked = self._facing_blocked.reshape(-1)
+        new = np.unique(pairs[~blocked[pairs]])
+        blocked[new] = True
+        if not len(new):
+            return 0.0
+        cubes, row = np.unique(new // sectors, return_inverse=True)
+        likelihood = np.ones((len(cubes), sectors), np.float32)
+        likelihood[row, new % sectors] = factor
+        return self.observe(cubes, likelihood)
+
+    def _facing_steps(self, near_m: float, far_m: float) -> list[tuple[int, tuple[int, int]]]:
+        """(sector, cube offset) of every cube between ``near_m`` and ``far_m`` ahead along each facing,
+        sampled every half cube."""
+        res = self.grid.resolution_m
+        steps = np.arange(near_m, far_m + 1e-9, res / 2)
+        return [(s, offset) for s, azimuth in enumerate(self.facing_azimuths_rad)
+                for offset in sorted({(round(d * math.cos(azimuth) / res), round(d * math.sin(azimuth) / res))
+                                      for d in steps})]
 
     def mass_near(self, position_m: np.ndarray, radius_m: float) -> float:
         """Probability that the target's centre lies within ``radius_m`` of ``position_m``."""

@@ -45,7 +45,7 @@ log = logging.getLogger(__name__)
 
 FILE_NAME = "checkpoint.syt"
 MAGIC = b"SYTCKPT\x00"
-VERSION = 1
+VERSION = 2  # 2: the belief's blocked facings
 ALIGN = 64
 HEADER_KEYS = ("request", "transport", "config", "wall_time_s", "search", "belief", "coded", "grid_shape", "arrays")
 
@@ -154,7 +154,8 @@ def encode_maps(belief: dict, log_odds: np.ndarray, observed: np.ndarray) -> tup
               "coded": {"belief.mass": [list(mass.shape), mass.dtype], "occupancy.log_odds": [list(odds.shape), odds.dtype]},
               "grid_shape": list(observed.shape)}
     arrays = {**_coded("belief.mass", mass), "belief.coarse": belief["coarse"],
-              "belief.seen_empty": np.packbits(belief["seen_empty"]), **_coded("occupancy.log_odds", odds),
+              "belief.seen_empty": np.packbits(belief["seen_empty"]),
+              "belief.facing_blocked": np.packbits(belief["facing_blocked"]), **_coded("occupancy.log_odds", odds),
               "occupancy.observed": np.packbits(observed)}
     return header, arrays
 
@@ -178,7 +179,9 @@ def decode_maps(checkpoint: Checkpoint) -> tuple[dict, np.ndarray, np.ndarray]:
     shape = tuple(h["grid_shape"])
     seen_empty, observed = (np.unpackbits(a[name], count=int(np.prod(shape))).astype(bool).reshape(shape)
                             for name in ("belief.seen_empty", "occupancy.observed"))
-    return {**h["belief"], "mass": mass, "coarse": a["belief.coarse"], "seen_empty": seen_empty}, odds, observed
+    blocked = np.unpackbits(a["belief.facing_blocked"], count=mass.size).astype(bool).reshape(mass.shape)
+    return ({**h["belief"], "mass": mass, "coarse": a["belief.coarse"], "seen_empty": seen_empty,
+             "facing_blocked": blocked}, odds, observed)
 
 
 def restore(search: Search, checkpoint: Checkpoint) -> None:

@@ -159,3 +159,18 @@ def test_no_picture_faces_a_wall_it_almost_touches():
     assert mass[0, :, :, 2].sum() == 0 and mass[0, :, :, 0].sum() > 0  # the west wall likewise
     assert mass[10, 5, 2].min() > 0  # the middle of the room faces anywhere
     assert mass.sum() == pytest.approx(0.9, rel=1e-5) and belief.prob_outside == pytest.approx(0.1)
+
+
+def test_a_facing_with_a_surface_just_in_front_keeps_a_share_once():
+    belief = TargetBelief(GRID, facing_sectors=4, prob_outside=0.1)  # facings +x, +y, -x, -y; 0.1 m cubes
+    solid = np.zeros(GRID.shape, bool)
+    solid[10] = True  # a surface across the room at x = 1.0-1.1 m
+    left = belief.rule_out_blocked_facings(solid, 0.2, 0.3, 0.1)
+    mass = belief.mass_by_facing()
+    before = mass[0, 0, 0, 0]  # far from the surface: every facing as it was, relatively
+    assert np.allclose(mass[:6], before) and np.allclose(mass[14:], before)
+    assert np.allclose(mass[7:9, :, :, 0], 0.1 * before) and np.allclose(mass[7:9, :, :, 1:], before)  # facing it
+    assert np.allclose(mass[12:14, :, :, 2], 0.1 * before)  # beyond it, facing back
+    assert np.allclose(mass[10, :, :, 0], before)  # the surface's own cubes: nothing solid 0.2 m out along x
+    assert left > 0 and belief.prob_outside + mass.sum() == pytest.approx(1.0, rel=1e-5)
+    assert belief.rule_out_blocked_facings(solid, 0.2, 0.3, 0.1) == 0.0  # the map says it again: nothing new

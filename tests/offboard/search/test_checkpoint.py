@@ -38,6 +38,7 @@ def _looked_at(seed: int) -> tuple[TargetBelief, OccupancyGrid]:
         b = np.where(rng.uniform(size=(seen.size, 8)) < 0.4, rng.choice([0.2, 0.5, 0.9], (seen.size, 8)), 0.0)
         belief.update_after_miss(seen, b)
     belief.rule_out_empty(rng.uniform(size=GRID.shape) < 0.2, 0.05)
+    belief.rule_out_blocked_facings(rng.uniform(size=GRID.shape) < 0.05, 0.15, 0.3, 0.1)
     occupancy = OccupancyGrid(GRID)
     with occupancy.edit() as (log_odds, observed):
         log_odds.flat[rng.choice(GRID.num_cubes, 300)] = rng.uniform(-2, 3.5, 300).astype(np.float32)
@@ -57,7 +58,7 @@ def test_the_belief_and_the_map_read_back_bit_for_bit(tmp_path):
     belief, occupancy = _looked_at(1)
     state, odds, observed = checkpoint.decode_maps(_saved_and_read(tmp_path, belief, occupancy))
     saved = belief.state()
-    for name in ("mass", "coarse", "seen_empty"):
+    for name in ("mass", "coarse", "seen_empty", "facing_blocked"):
         assert state[name].dtype == saved[name].dtype and np.array_equal(state[name], saved[name])
     assert {k: state[k] for k in ("outside", "scale", "stored_total", "success_prob")} == \
         {k: saved[k] for k in ("outside", "scale", "stored_total", "success_prob")}
@@ -75,6 +76,9 @@ def test_a_restored_belief_goes_on_exactly_as_the_original(tmp_path):
     assert resumed.update_after_miss(seen, b) == belief.update_after_miss(seen, b)
     empty = np.random.default_rng(5).uniform(size=GRID.shape) < 0.3  # partly seen empty before: once per cube
     assert resumed.rule_out_empty(empty, 0.05) == belief.rule_out_empty(empty, 0.05)
+    solid = np.random.default_rng(6).uniform(size=GRID.shape) < 0.1  # partly solid before: once per facing
+    assert resumed.rule_out_blocked_facings(solid, 0.15, 0.3, 0.1) == \
+        belief.rule_out_blocked_facings(solid, 0.15, 0.3, 0.1)
     assert np.array_equal(resumed.state()["mass"], belief.state()["mass"])
     assert np.array_equal(resumed.coarse_mass(), belief.coarse_mass())
     assert resumed.success_prob == belief.success_prob and resumed.prob_outside == belief.prob_outside
@@ -84,7 +88,9 @@ def test_the_saved_states_cover_everything_the_belief_and_the_tracker_hold():
     """A field added to either without a place in its state() would be lost by a resume."""
     belief, _ = _looked_at(6)
     saved = belief.state()
-    fixed = {"grid", "facing_sectors", "coarse_factor", "coarse_shape"}  # given to the constructor, or derived
+    # given to the constructor, or derived; solid_done is a cache that restore() clears and the next
+    # rule_out_blocked_facings rebuilds (test_a_restored_belief_goes_on_exactly_as_the_original)
+    fixed = {"grid", "facing_sectors", "coarse_factor", "coarse_shape", "solid_done"}
     assert {name.lstrip("_") for name in vars(belief)} - fixed == set(saved)
     tracker = PoseTracker(Pose2D(0.0, 0.0, 0.0))
     assert {name.lstrip("_") for name in vars(tracker)} - {"model"} == set(tracker.state())
