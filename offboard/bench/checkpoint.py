@@ -92,10 +92,10 @@ def run(writes: int = 15, looks: int = LOOKS) -> dict:
         state, odds, observed = checkpoint.decode_maps(checkpoint.read(Path(tmp)))
         read_ms = (time.perf_counter() - started) * 1000.0
     saved = belief.state()
-    exact = all(np.array_equal(state[k], saved[k]) for k in ("mass", "coarse", "seen_empty", "facing_blocked")) and \
+    arrays = ("mass", "coarse", "seen_empty", "facing_blocked")
+    exact = all(np.array_equal(state[k], saved[k]) for k in arrays) and \
         np.array_equal(odds, occupancy.log_odds) and np.array_equal(observed, occupancy.observed)
-    raw = sum(saved[k].nbytes for k in ("mass", "coarse", "seen_empty", "facing_blocked")) + occupancy.log_odds.nbytes + \
-        occupancy.observed.nbytes
+    raw = sum(saved[k].nbytes for k in arrays) + occupancy.log_odds.nbytes + occupancy.observed.nbytes
     return {
         "checkpoint_write_ms": round(float(np.median(write_ms)), 1),
         "checkpoint_write_ms_max": round(float(np.max(write_ms)), 1),
