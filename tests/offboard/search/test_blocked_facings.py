@@ -49,10 +49,15 @@ def _shares(world, occupancy, config: SearchConfig, point_m: np.ndarray) -> np.n
     return mass / mass.max()
 
 
+def _own_sector(world, config: SearchConfig) -> int:
+    """The facing sector the target's picture points into."""
+    return round(world.target.yaw_deg % 360 / (360 / config.facing_sectors)) % config.facing_sectors
+
+
 def test_the_picture_keeps_its_own_facing_and_a_facing_into_it_is_blocked(mapped_target):
     world, occupancy = mapped_target
     config, target = SearchConfig(), world.target
-    own = round(target.yaw_deg % 360 / (360 / config.facing_sectors)) % config.facing_sectors
+    own = _own_sector(world, config)
     back = (own + config.facing_sectors // 2) % config.facing_sectors
     assert _shares(world, occupancy, config, target.center_m())[own] == 1.0
     in_front = target.center_m() + 0.45 * target.facing()  # the picture 0.34 m ahead when facing back
@@ -62,5 +67,4 @@ def test_the_picture_keeps_its_own_facing_and_a_facing_into_it_is_blocked(mapped
 def test_without_the_gap_stereo_s_own_face_would_block_the_picture_s_facing(mapped_target):
     world, occupancy = mapped_target
     config = replace(SearchConfig(), blocked_facing_gap_m=0.0)
-    own = round(world.target.yaw_deg % 360 / (360 / config.facing_sectors)) % config.facing_sectors
-    assert _shares(world, occupancy, config, world.target.center_m())[own] < 1.0
+    assert _shares(world, occupancy, config, world.target.center_m())[_own_sector(world, config)] < 1.0
