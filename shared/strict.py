@@ -12,12 +12,19 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import reprlib
 import types
 import typing
 from functools import cache
 from typing import Any, Literal, Union
 
 import numpy as np
+
+
+# A value is shown a few levels deep: plain repr recurses, so a payload of ~1000 nested arrays (which
+# msgpack still unpacks) raised RecursionError while its own error was being written.
+_SHOWN = reprlib.Repr()
+_SHOWN.maxlevel, _SHOWN.maxstring, _SHOWN.maxother, _SHOWN.maxlong = 3, 80, 80, 80
 
 
 class StructureError(ValueError):
@@ -27,7 +34,7 @@ class StructureError(ValueError):
         self.field = field
         self.value = value
         self.problem = problem
-        shown = repr(value)
+        shown = _SHOWN.repr(value)
         if len(shown) > 80:
             shown = shown[:77] + "..."
         super().__init__(f"{field or '<message>'}: {problem} (got {shown})")

@@ -126,6 +126,12 @@ def test_expected_type_is_enforced():
         decode(encode(m.StopCommand("s")), m.LookResult)
 
 
+@pytest.mark.parametrize("depth", [1000, 1020])  # msgpack unpacks to 1023 levels, deeper than repr can go
+def test_arrays_nested_as_deep_as_msgpack_allows_are_a_protocol_error(depth):
+    with pytest.raises(ProtocolError, match=r"expected a map .*got \[\[\[\[\.\.\.\]\]\]\]"):
+        decode(b"\x91" * depth + b"\xc0")
+
+
 @given(st.binary(max_size=200))
 def test_random_bytes_never_escape_as_anything_but_protocol_error(data):
     try:
