@@ -221,7 +221,9 @@ class SearchPlanner:
     def _values(self, pose: Pose2D, occupancy: OccupancyGrid) -> ActionValues:
         far = self.table.range_m[1]
         here_row = np.zeros(1, np.int64)
-        self._here.place(here_row, np.array([[pose.x_m, pose.y_m]]))
+        here = np.array([[pose.x_m, pose.y_m]])
+        if not np.array_equal(self._here.positions_m, here):  # the looks from one spot share its geometry
+            self._here.place(here_row, here)
         parts = ((self._geometry.geometry, self._geometry.rows(self.positions)), (self._here, here_row))
         factor = max(1, round(self.config.sphere_resolution_m / occupancy.grid.resolution_m))
         coarse = occupancy.coarsened(factor)

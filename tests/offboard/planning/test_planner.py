@@ -274,3 +274,15 @@ def test_the_geometry_cache_holds_each_candidate_as_computed_afresh_as_candidate
             assert np.array_equal(getattr(cache.geometry, name)[rows], getattr(fresh, name)), name
     with pytest.raises(ValueError, match="do not fit"):
         cache.rows(np.arange(12).reshape(6, 2) * 0.25)
+
+
+def test_the_looks_here_are_valued_as_from_a_candidate_there_as_the_robot_stays_and_moves():
+    occupancy = OccupancyGrid(ROOM)
+    planner = _planner(3)
+    away, near_b = Pose2D(1.0, 1.0, 0.0), Pose2D(2.0, 1.0, 0.0)  # vertices out of the detector's reach of B, and in it
+    for pose in (away, away, near_b, near_b, away, near_b):  # the geometry here is reused, then replaced
+        planner.plan_positions(pose, occupancy.floor_map(0.2, 1.2), 0.25)
+        values = planner.decide(pose, 0.0, 0.0, 0.0, occupancy, _paths(planner, pose)).values
+        there = np.flatnonzero(np.all(planner.positions == (pose.x_m, pose.y_m), axis=1))[0]
+        assert np.array_equal(values.find_prob[-1], values.find_prob[there])
+        assert (values.find_prob[-1].max() > 0.1) == (pose == near_b)
