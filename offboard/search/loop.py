@@ -157,12 +157,7 @@ class Search:
         self.info = info
         self.mount = info.mount.to_mount()
         self.intrinsics = info.intrinsics.to_intrinsics()
-        grid = VoxelGrid(config.room_m, config.resolution_m)
-        self.occupancy = OccupancyGrid(grid, config.occupancy)
-        self.belief = TargetBelief(grid, config.facing_sectors, config.prob_outside,
-                                   coarse_factor=planning_block_factor(config))
-        self.belief.set_prior(prior, config.prob_outside)
-        self.belief.exclude_facings_into_walls(facing_clearance_m(target_depth_m, config))
+        self.occupancy, self.belief = starting_maps(config, prior, target_depth_m)
         self.time_model = TimeModel(info.base, info.pantilt, info.camera)
         self.planner = SearchPlanner(self.belief, config.planner, self._planning_table(), self.time_model,
                                      self.intrinsics, self.mount)
@@ -531,6 +526,16 @@ def seen_empty(occupancy: OccupancyGrid, config: SearchConfig) -> np.ndarray:
     anything it could stand on (see :meth:`OccupancyGrid.seen_empty`)."""
     return occupancy.seen_empty(config.empty_log_odds, round(config.empty_margin_m / config.resolution_m),
                                 config.resting_target)
+
+
+def starting_maps(config: SearchConfig, prior: np.ndarray, target_depth_m: float) -> tuple[OccupancyGrid, TargetBelief]:
+    """A search's maps before its first look: nothing mapped, and the belief ``prior`` with no
+    picture facing into a wall."""
+    grid = VoxelGrid(config.room_m, config.resolution_m)
+    belief = TargetBelief(grid, config.facing_sectors, config.prob_outside, coarse_factor=planning_block_factor(config))
+    belief.set_prior(prior, config.prob_outside)
+    belief.exclude_facings_into_walls(facing_clearance_m(target_depth_m, config))
+    return OccupancyGrid(grid, config.occupancy), belief
 
 
 def fold_in_map(belief: TargetBelief, occupancy: OccupancyGrid, config: SearchConfig, target_depth_m: float) -> None:
