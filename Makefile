@@ -10,6 +10,10 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -c constraints.txt -e '.[test]'  # the versions the figures were measured with
+	# numba's kernels into its cache, once: else the first search, and each process of the parallel tests,
+	# compiles them (about 30 s for the planner's, 25 s for the simulator's renderer)
+	$(VENV)/bin/syt-offboard compile
+	$(VENV)/bin/syt-onboard compile
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -10,5 +10,6 @@ Subpackages, in the order they may import each other (a test enforces it):
 - ``experiments``: sweeps of searches over worlds, baselines, the report;
 - ``bench``: the benchmarks.
 
-Everything here imports ``shared``, never ``onboard``.
+Beside them, ``cli`` (the ``syt-offboard`` command) and ``kernel_cache`` (numba's cache filled before
+any search needs it) may import any of them. Everything here imports ``shared``, never ``onboard``.
 """

@@ -9,6 +9,7 @@
     syt-offboard calibrate-detector --detector sift --target-picture P --out TABLE.json
     syt-offboard experiment --preset paper --out DIR [--baselines] [--jobs N]
     syt-offboard fuzz --cases N [--json]            every decoder; --live: malformed queries to an agent
+    syt-offboard compile                            the numba kernels into numba's cache (make does it once)
 """
 
 from __future__ import annotations
@@ -224,6 +225,17 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- numba's cache --------------------------------------------------------------------------------
+
+def _compile(args: argparse.Namespace) -> int:
+    from offboard.kernel_cache import compile_kernels
+
+    started = time.monotonic()
+    compile_kernels()
+    log.info("numba kernels ready in %.1f s", time.monotonic() - started)
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="syt-offboard", description="The planner side of syt.")
     parser.add_argument("-v", "--verbose", action="store_true")
@@ -269,6 +281,8 @@ def _parser() -> argparse.ArgumentParser:
     fuzzing = sub.add_parser("fuzz", help="fuzz every decoder (hypothesis), or a running agent with --live")
     fuzz.add_arguments(fuzzing)
     fuzzing.set_defaults(func=fuzz.main)
+    sub.add_parser("compile", help="compile the numba kernels into numba's on-disk cache, so no search pays for "
+                                   "compilation").set_defaults(func=_compile)
     return parser
 
 

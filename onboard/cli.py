@@ -11,6 +11,7 @@
     syt-onboard calibrate-stereo --images DIR --board COLSxROWS --square-mm S --out stereo.yaml
     syt-onboard probe [--port PORT] [--json]          serial ports and cameras, and what answers on them
     syt-onboard make-certs --out DIR [--host NAME]   mutual-TLS certificates and Zenoh configs (README, Security)
+    syt-onboard compile                             the simulator's renderer into numba's cache (make does it once)
 """
 
 from __future__ import annotations
@@ -348,9 +349,23 @@ def run_probe(argv: list[str]) -> int:
     return 0
 
 
+def run_compile(argv: list[str]) -> int:
+    """The simulator's renderer into numba's on-disk cache, as an agent starting compiles it: ``make``
+    runs this once after installing, or each agent of a fresh checkout compiles it (about 25 s)."""
+    argparse.ArgumentParser(prog="syt-onboard compile",
+                            description="Compile the simulator's renderer into numba's cache.").parse_args(argv)
+    _setup_logging(False)
+    from onboard.sim.robot import build_sim_robot
+    from onboard.sim.world import load_world
+
+    config = OnboardConfig()
+    build_sim_robot(config, load_world(config.sim.world, robot_radius_m=config.base.radius_m))
+    return 0
+
+
 _COMMANDS = {"render": run_render, "bench": run_bench, "picture": run_picture, "worlds": run_worlds,
              "emulate": run_emulate, "calibrate-stereo": run_calibrate_stereo, "probe": run_probe,
-             "make-certs": run_make_certs}
+             "make-certs": run_make_certs, "compile": run_compile}
 
 
 def main(argv: list[str] | None = None) -> int:
