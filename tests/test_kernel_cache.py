@@ -1,10 +1,10 @@
-"""``syt-offboard compile`` and ``syt-onboard compile`` (``make`` runs both) fill numba's on-disk cache
-with every kernel of their side, so that a later process compiles none of them: each run here is a
-fresh process on an empty ``NUMBA_CACHE_DIR``."""
+"""``syt-offboard compile`` and ``syt-onboard compile`` (``make`` runs both after installing) call every
+numba kernel of their side, so that numba's on-disk cache holds them all before a search starts.
+Each runs in a fresh process here, which then reports the kernels it called: a kernel numba has
+compiled or loaded for some argument types has a signature."""
 
 import ast
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -13,50 +13,47 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# compile_kernels() again, in a process that names every compilation numba starts (a cache miss)
+# run a compile command's function, then name every kernel of PACKAGE (module, function) it called
 SCRIPT = """
-import json
-from numba.core import event
-
-compiled = []
-
-class Compiled(event.Listener):
-    def on_start(self, ev):
-        function = ev.data["dispatcher"].py_func
-        compiled.append(f"{function.__module__}.{function.__qualname__}")
-
-    def on_end(self, ev):
-        pass
-
-event.register("numba:compile", Compiled())
-from offboard.kernel_cache import compile_kernels
-
-compile_kernels()
-print(json.dumps(compiled))
+import importlib, json, sys
+package, kernels = sys.argv[1], json.loads(sys.argv[2])
+if package == "offboard":
+    from offboard.kernel_cache import compile_kernels
+    compile_kernels()
+else:
+    from onboard.cli import run_compile
+    run_compile([])
+modules = {m: importlib.import_module(m) for m, _ in kernels}
+print(json.dumps([[m, f] for m, f in kernels if getattr(modules[m], f).signatures]))
 """
 
 
-def _run(cache_dir: Path, *argv: str) -> str:
-    done = subprocess.run([sys.executable, *argv], cwd=ROOT, env={**os.environ, "NUMBA_CACHE_DIR": str(cache_dir)},
-                          capture_output=True, text=True, timeout=240)
-    assert done.returncode == 0, done.stderr
-    return done.stdout
-
-
-def _kernels(package: str) -> set[str]:
-    """``module.function`` of every ``numba.njit`` function of ``package`` that numba caches on its
-    own: not those inlined into their callers (``inline="always"``), which are compiled into them."""
-    found = set()
+def _kernels(package: str) -> dict[tuple[str, str], set[tuple[str, str]]]:
+    """(module, function) of every ``numba.njit`` function of ``package`` that numba caches on its
+    own (not those inlined into their callers, ``inline="always"``), each with the kernels of its
+    module it calls."""
+    found = {}
     for path in (ROOT / package).rglob("*.py"):
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.FunctionDef) and any(_is_cached_njit(d) for d in node.decorator_list):
-                found.add(f"{path.stem}.{node.name}")
+        module = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+        kernels = [node for node in ast.walk(ast.parse(path.read_text()))
+                   if isinstance(node, ast.FunctionDef) and any(_is_cached_njit(d) for d in node.decorator_list)]
+        names = {node.name for node in kernels}
+        for node in kernels:
+            calls = {c.func.id for c in ast.walk(node) if isinstance(c, ast.Call) and isinstance(c.func, ast.Name)}
+            found[(module, node.name)] = {(module, name) for name in calls & names}
     return found
 
 
-def _indexed(cache_dir: Path) -> set[str]:
-    """The kernels numba's cache holds: ``module.function-line.py311.nbi``, one a kernel."""
-    return {path.name.split("-")[0] for path in cache_dir.rglob("*.nbi")}
+def _reached(called: set, kernels: dict) -> set:
+    """The kernels ``called``, and those they call: a kernel loaded from the cache brings its callees
+    compiled in, and their own dispatchers are never asked."""
+    reached, todo = set(), list(called)
+    while todo:
+        kernel = todo.pop()
+        if kernel not in reached:
+            reached.add(kernel)
+            todo.extend(kernels.get(kernel, ()))
+    return reached
 
 
 def _is_cached_njit(decorator: ast.expr) -> bool:
@@ -65,22 +62,21 @@ def _is_cached_njit(decorator: ast.expr) -> bool:
     return call and options.get("cache") is True and options.get("inline") != "always"
 
 
-@pytest.mark.long
-def test_after_the_offboard_command_a_search_compiles_none_of_its_kernels(tmp_path):
-    _run(tmp_path, "-m", "offboard.cli", "compile")
-    assert _kernels("offboard") - _indexed(tmp_path) == set()  # each compiled and cached
-    again = json.loads(_run(tmp_path, "-c", SCRIPT).splitlines()[-1])
-    assert [name for name in again if name.startswith("offboard.")] == []  # the search's calls: all loaded
-
-
-@pytest.mark.long
-def test_the_onboard_command_caches_the_simulators_renderer(tmp_path):
-    _run(tmp_path, "-m", "onboard.cli", "compile")
-    assert _kernels("onboard") == _indexed(tmp_path) == {"render._projected_bounds", "render._bin_boxes", "render._cast"}
+@pytest.mark.parametrize("package", ["offboard", "onboard"])
+def test_each_compile_command_calls_every_cached_kernel_of_its_side(package):
+    kernels = _kernels(package)
+    done = subprocess.run([sys.executable, "-c", SCRIPT, package, json.dumps(sorted(kernels))], cwd=ROOT,
+                          capture_output=True, text=True, timeout=240)
+    assert done.returncode == 0, done.stderr
+    called = {tuple(k) for k in json.loads(done.stdout.splitlines()[-1])}
+    assert set(kernels) - _reached(called, kernels) == set()
 
 
 def test_the_kernels_found_are_each_sides_own():
-    kernels = _kernels("offboard")
-    assert {"occupancy._integrate_frame", "belief._scale_seen_mass", "repeat_codec._decode"} <= kernels
-    assert "occupancy._to_cubes" not in kernels  # inlined into its callers
-    assert "render._cast" not in kernels and "render._cast" in _kernels("onboard")
+    offboard, onboard = set(_kernels("offboard")), set(_kernels("onboard"))
+    assert {("offboard.perception.occupancy", "_integrate_frame"), ("offboard.planning.belief", "_scale_seen_mass"),
+            ("offboard.search.repeat_codec", "_decode")} <= offboard
+    assert ("offboard.perception.occupancy", "_to_cubes") not in offboard  # inlined into its callers
+    assert _kernels("offboard")[("offboard.perception.occupancy", "_cast_rays")] == {("offboard.perception.occupancy",
+                                                                                        "_cast_one")}
+    assert onboard == {("onboard.sim.render", f) for f in ("_projected_bounds", "_bin_boxes", "_cast")}
