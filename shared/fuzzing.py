@@ -16,14 +16,17 @@ examples, so one command can report on every decoder. Both programs' fuzzers (``
 from __future__ import annotations
 
 import re
+import sys
 import time
 from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 INSTALL_HINT = ("fuzzing needs hypothesis, a test extra: install it with "
                 "`.venv/bin/pip install -e '.[test]'` (or `pip install 'hypothesis>=6.100'`)")
 EXAMPLES_KEPT = 5
+_PROGRAM_RECURSION_LIMIT = sys.getrecursionlimit()  # as imported: hypothesis raises it while it runs
 BATCH = 20  # cases per hypothesis example: its engine costs more per example than most decoders do
 
 
@@ -103,10 +106,25 @@ _GOT = re.compile(r" \(got .*\)$", re.DOTALL)  # how StructureError ends its mes
 _KEY_PREFIX = re.compile(r"^([A-Za-z_]\w*(?:\[\d+\])?(?:\.[A-Za-z_]\w*(?:\[\d+\])?)*): ")
 
 
-def judge(target: FuzzTarget, case: Case) -> tuple[str, str | None]:
-    """``("refused" | "accepted" | "failed", what went wrong)`` for one case."""
+@contextmanager
+def _program_recursion_limit():
+    """Python's usual recursion limit for the duration. Hypothesis raises the limit by thousands of
+    frames while it runs, which hid a decoder's RecursionError on ~1000 nested arrays from this
+    fuzzer; the agent, fuzzed live, raised it."""
+    raised = sys.getrecursionlimit()
+    sys.setrecursionlimit(_PROGRAM_RECURSION_LIMIT)
     try:
-        target.decode(case.data)
+        yield
+    finally:
+        sys.setrecursionlimit(raised)
+
+
+def judge(target: FuzzTarget, case: Case) -> tuple[str, str | None]:
+    """``("refused" | "accepted" | "failed", what went wrong)`` for one case, decoded under the
+    recursion limit a program runs with."""
+    try:
+        with _program_recursion_limit():
+            target.decode(case.data)
     except target.error as exc:
         if names_field(exc, case):
             return "refused", None

@@ -269,8 +269,9 @@ def wire_damage(draw: st.DrawFn, payload: bytes) -> tuple[bytes, str, bool]:
         return bytes(damaged), how, False
     if how == "random bytes":
         return draw(st.binary(max_size=200)), how, False
-    if how == "deep nesting":
-        return b"\x91" * draw(st.integers(100, 100_000)) + b"\xc0", how, True
+    if how == "deep nesting":  # msgpack unpacks up to 1023 levels: near its edge, deeper than repr() can go
+        depth = draw(st.sampled_from([1000, 1023, 1024]) | st.integers(100, 100_000))
+        return b"\x91" * depth + b"\xc0", how, True
     header = draw(st.sampled_from([b"\xdf", b"\xdd", b"\xdb", b"\xc6", b"\xc9\x01"]))
     return header + b"\xff\xff\xff\xff" + draw(st.binary(max_size=16)), how, True
 

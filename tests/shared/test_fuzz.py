@@ -58,6 +58,15 @@ def test_the_runner_counts_every_kind_of_failure(decode_fn, fails):
     assert bool(report.examples) == fails
 
 
+def _nested(depth: int) -> int:
+    return 0 if depth == 0 else 1 + _nested(depth - 1)
+
+
+def test_a_decoder_that_recurses_past_pythons_limit_fails_though_hypothesis_raises_the_limit():
+    report = run_target(_target(lambda data: _nested(1500), Case(b"z", None, False, "deep")), 5)
+    assert report.failures == report.cases and "RecursionError" in report.examples[0]
+
+
 def test_a_case_that_may_be_valid_may_be_accepted():
     report = run_target(_target(lambda data: None, Case(b"y", "pose.x_m", False, "other value")), 5)
     assert (report.failures, report.accepted) == (0, report.cases)
