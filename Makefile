@@ -11,9 +11,8 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -c constraints.txt -e '.[test]'  # the versions the figures were measured with
 	# numba's kernels into its cache, once: else the first search, and each process of the parallel tests,
-	# compiles them (about 30 s for the planner's, 25 s for the simulator's renderer)
-	$(VENV)/bin/syt-offboard compile
-	$(VENV)/bin/syt-onboard compile
+	# compiles them (about 30 s each for the planner's and the simulator's renderer, side by side here)
+	$(VENV)/bin/syt-onboard compile & renderer=$$!; $(VENV)/bin/syt-offboard compile && wait $$renderer
 	touch $(STAMP)
 
 demo: $(STAMP)
