@@ -3,7 +3,8 @@
 The room is the report's (9 × 5 × 2.5 m, 32 candidate positions × 17 settings = 544 actions). The
 map holds what a few stereo frames of walls and furniture would put there, the belief a hints
 prior, so that sensed spheres are not all empty. A decision includes the navigation distances to
-the candidates, the sensed spheres at all of them, and scoring every action.
+the candidates, the sensed spheres at all of them, and scoring every action. It is repeated from one
+pose, as the looks from one spot are, so the geometry of the looks here is computed once.
 """
 
 from __future__ import annotations
