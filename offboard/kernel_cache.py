@@ -50,7 +50,6 @@ WORLD = "paper-lab"
 K = Intrinsics.from_fov(640, 480, 66.0)  # the simulated Bumblebee's, as in the benchmarks
 MOUNT = HeadMount()
 BASE = BaseLimits()
-TARGET_M = 0.23  # the bundled target's edge
 BLOCK_PX = 16  # the search's blocks of visible depth (Search._interpret)
 WALL_M = 2.0  # the synthetic frame: a wall this far ahead
 
@@ -81,6 +80,7 @@ class _Scene:
     belief: TargetBelief
     planner: SearchPlanner
     pose: Pose2D
+    target_depth_m: float
 
 
 def compile_kernels() -> list[str]:
@@ -108,9 +108,10 @@ def _scene() -> _Scene:
     config = dataclasses.replace(SearchConfig(), room_m=world.room.size_m)
     table = shipped_table(config.detector)
     prior = build_prior(VoxelGrid(config.room_m, config.resolution_m), ["uniform"])
-    occupancy, belief = starting_maps(config, prior, TARGET_M)
+    depth_m = world.target.size_m[0]  # along the picture's normal, as the search is given it
+    occupancy, belief = starting_maps(config, prior, depth_m)
     planner = SearchPlanner(belief, config.planner, table, TimeModel(BASE, PanTiltLimits(), CameraTiming()), K, MOUNT)
-    return _Scene(config, table, occupancy, belief, planner, world.start)
+    return _Scene(config, table, occupancy, belief, planner, world.start, depth_m)
 
 
 def _wall(depth_m: float) -> np.ndarray:
@@ -127,7 +128,7 @@ def _look(scene: _Scene, disparity: np.ndarray) -> None:
     footprint = look_footprint(scene.occupancy.grid, camera, K, depth, BLOCK_PX, scene.table,
                                scene.belief.facing_azimuths_rad, scene.config.planner.behind_surface_m)
     scene.belief.update_after_miss(footprint.cube_index, footprint.detection_prob)
-    fold_in_map(scene.belief, scene.occupancy, scene.config, TARGET_M)
+    fold_in_map(scene.belief, scene.occupancy, scene.config, scene.target_depth_m)
 
 
 def _decide(scene: _Scene) -> None:
