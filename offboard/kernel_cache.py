@@ -136,9 +136,8 @@ def _decide(scene: _Scene) -> None:
     floor map, every action scored on the coarsened map and belief."""
     floor = _floor(scene)
     here = (scene.pose.x_m, scene.pose.y_m)
-    scene.planner.plan_positions(scene.pose, floor, BASE.radius_m + 0.05)
-    field_m = grid_planner.distance_field(floor, here)
-    paths = grid_planner.distances_at(floor, field_m, scene.planner.positions)
+    scene.planner.plan_positions(scene.pose, floor, BASE.radius_m + NavigatorConfig().margin_m)
+    paths = grid_planner.path_lengths(floor, here, scene.planner.positions)
     scene.planner.decide(scene.pose, 0.0, 0.0, 0.0, scene.occupancy, paths)
 
 

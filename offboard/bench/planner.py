@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from offboard.navigation import grid_planner
+from offboard.navigation.navigator import NavigatorConfig
 from offboard.planning.belief import TargetBelief
 from offboard.perception.detectability import DetectabilityTable
 from offboard.planning.detection_function import look_footprint, visible_depth
@@ -32,6 +33,7 @@ log = logging.getLogger(__name__)
 ROOM_M = (9.0, 5.0, 2.5)
 K = Intrinsics.from_fov(640, 480, 66.0)
 MOUNT = HeadMount()
+BASE = BaseLimits()
 TABLES = (HintBox((1.0, 4.3, 0.75), (2.4, 5.0, 1.05), 0.45), HintBox((3.9, 2.27, 0.75), (5.1, 2.73, 1.05), 0.45))
 
 
@@ -45,7 +47,7 @@ def _scenario(resolution_m: float) -> tuple[SearchPlanner, OccupancyGrid]:
     belief = TargetBelief(grid, coarse_factor=max(1, round(0.2 / resolution_m)))
     belief.set_prior(hints(grid, TABLES), prob_outside=0.05)
     planner = SearchPlanner(belief, PlannerConfig(), DetectabilityTable.nominal(),
-                            TimeModel(BaseLimits(), PanTiltLimits(), CameraTiming()), K, MOUNT)
+                            TimeModel(BASE, PanTiltLimits(), CameraTiming()), K, MOUNT)
     return planner, occupancy
 
 
@@ -55,10 +57,9 @@ def _decide(planner: SearchPlanner, occupancy: OccupancyGrid, pose: Pose2D):
     :meth:`~OccupancyGrid.coarsened`."""
     with occupancy.edit():
         pass
-    floor = occupancy.floor_map(0.26, 1.35)
-    planner.plan_positions(pose, floor, 0.31)
-    field = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
-    paths = grid_planner.distances_at(floor, field, planner.positions)
+    floor = occupancy.floor_map(BASE.radius_m, BASE.height_m)
+    planner.plan_positions(pose, floor, BASE.radius_m + NavigatorConfig().margin_m)
+    paths = grid_planner.path_lengths(floor, (pose.x_m, pose.y_m), planner.positions)
     return planner.decide(pose, 0.0, 0.0, 0.0, occupancy, paths)
 
 

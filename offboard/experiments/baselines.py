@@ -257,8 +257,7 @@ class Oracle:
     def _move(self, pose: Pose2D) -> Decision:
         gx, gy = self.goal
         floor = true_floor_map(self.truth, self.config.oracle_view)
-        field_m = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
-        path = float(grid_planner.distances_at(floor, field_m, np.array([self.goal]))[0])
+        path = float(grid_planner.path_lengths(floor, (pose.x_m, pose.y_m), np.array([self.goal]))[0])
         travel = self.planner.time_model.travel_s(path, pose.bearing_to(gx, gy))
         look = self._look_from(Pose2D(gx, gy, math.atan2(gy - pose.y_m, gx - pose.x_m)), 0.0, 0.0, travel)
         return Decision("move", f"oracle: to the viewpoint ({gx:.2f}, {gy:.2f}), {path:.1f} m",

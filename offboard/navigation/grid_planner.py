@@ -114,6 +114,12 @@ def distances_at(floor_map: FloorMap, field: np.ndarray, points_xy: np.ndarray) 
     return out
 
 
+def path_lengths(floor_map: FloorMap, start_xy: Point, points_xy: np.ndarray) -> np.ndarray:
+    """Shortest path length (m) from ``start_xy`` to each world point (N, 2); ``inf`` where no path
+    reaches it."""
+    return distances_at(floor_map, distance_field(floor_map, start_xy), points_xy)
+
+
 def shortest_path(floor_map: FloorMap, start_xy: Point, goal_xy: Point) -> list[Point] | None:
     """Shortest collision-free polyline from start to goal (both included), or ``None``.
 

@@ -175,9 +175,11 @@ class Navigator:
         robot so boxed in squeezes through on the bare radius. Rounded up (6 cubes of 5 cm for the
         Pioneer's 0.26 m) that still keeps 0.275 m from a mapped cube's near face; the margin for odometry
         error is what it gives up, and the bumper is the last line."""
-        return self.occupancy.floor_map(self._clearance_m(squeeze), self._base.height_m)
+        return self.occupancy.floor_map(self.clearance_m(squeeze), self._base.height_m)
 
-    def _clearance_m(self, squeeze: bool) -> float:
+    def clearance_m(self, squeeze: bool = False) -> float:
+        """How far the base's centre keeps from a mapped obstacle: its radius and ``margin_m``, or with
+        ``squeeze`` its bare radius."""
         return self._base.radius_m + (0.0 if squeeze else self.config.margin_m)
 
     # --- sensing -----------------------------------------------------------------------------------
@@ -281,7 +283,7 @@ class Navigator:
         """The floor map of cubes with strong evidence only (a view of the shared grid, not a copy)."""
         view = copy.copy(self.occupancy)
         view.config = replace(self.occupancy.config, occupied_log_odds=self.config.confident_log_odds)
-        return view.floor_map(self._clearance_m(squeeze), self._base.height_m)
+        return view.floor_map(self.clearance_m(squeeze), self._base.height_m)
 
     def _back_again(self, run: _Run) -> bool:
         """Has the robot come back to where an earlier step (not the last) ended?"""

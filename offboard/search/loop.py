@@ -245,9 +245,9 @@ class Search:
     def _choose_on(self, pose: Pose2D, squeeze: bool, policy: Policy | None = None) -> Decision:
         floor = self.navigator.floor_map(squeeze)  # the navigator's clearance: a path here is one it drives
         if self._plans_positions:
-            self.planner.plan_positions(pose, floor, self.info.base.radius_m + 0.05)
-        field_m = grid_planner.distance_field(floor, (pose.x_m, pose.y_m))
-        paths = grid_planner.distances_at(floor, field_m, self.planner.positions)
+            # the full clearance even when squeezing: the aimed viewpoints' geometry is cached per margin
+            self.planner.plan_positions(pose, floor, self.navigator.clearance_m())
+        paths = grid_planner.path_lengths(floor, (pose.x_m, pose.y_m), self.planner.positions)
         for goal in self.state.unreachable:
             paths[np.hypot(*(self.planner.positions - goal).T) < self.config.planner.same_position_m] = np.inf
         return (policy or self.policy).decide(pose, *self._pan_tilt, self.elapsed_s(), self.occupancy, paths,

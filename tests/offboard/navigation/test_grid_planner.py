@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from offboard.navigation.grid_planner import (distance_field, distances_at, nearest_free_cell, path_length_m, segment_is_free,
+from offboard.navigation.grid_planner import (distance_field, nearest_free_cell, path_length_m, path_lengths, segment_is_free,
                                    shortest_path)
 from offboard.perception.occupancy import FloorMap
 from conftest import RES, floor_map
@@ -38,12 +38,10 @@ def test_distance_field_goes_round_walls_and_marks_enclosures_unreachable():
     occupied[150:170, 60:62] = occupied[150:170, 80:82] = True  # a closed pen
     occupied[150:152, 60:82] = occupied[168:170, 60:82] = True
     fmap = floor_map(occupied)
-    field = distance_field(fmap, (1.0, 1.0))
-    behind = distances_at(fmap, field, np.array([[8.0, 1.0]]))[0]
+    behind, pen, outside = path_lengths(fmap, (1.0, 1.0), np.array([[8.0, 1.0], [8.0, 3.5], [-1.0, 1.0]]))
     detour = math.dist((1.0, 1.0), (4.5, 3.5)) + math.dist((4.5, 3.5), (8.0, 1.0))
     assert detour <= behind <= detour * 1.09  # 8-connected paths are at most ~8 % long
-    assert distances_at(fmap, field, np.array([[8.0, 3.5]]))[0] == math.inf  # inside the pen
-    assert distances_at(fmap, field, np.array([[-1.0, 1.0]]))[0] == math.inf  # outside the room
+    assert pen == math.inf and outside == math.inf
 
 
 def test_blocked_start_starts_from_the_nearest_free_cell():
@@ -109,16 +107,15 @@ def test_random_maps_paths_agree_with_the_field(seed, start, goal):
     occupied = rng.random((60, 40)) < 0.05
     fmap = floor_map(cv2.dilate(occupied.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool))
     path = shortest_path(fmap, start, goal)
-    field = distance_field(fmap, start)
-    reachable = bool(np.isfinite(distances_at(fmap, field, np.array([goal]))[0])) and not fmap.blocked[
-        int(goal[0] / RES), int(goal[1] / RES)]
+    along_field = path_lengths(fmap, start, np.array([goal]))[0]
+    reachable = bool(np.isfinite(along_field)) and not fmap.blocked[int(goal[0] / RES), int(goal[1] / RES)]
     assert (path is not None) == reachable
     if path is not None:
         hops = list(zip(path[:-1], path[1:]))
         start_blocked = fmap.blocked[int(start[0] / RES), int(start[1] / RES)]
         assert all(segment_is_free(fmap, a, b) for a, b in hops[1 if start_blocked else 0:])
         assert path_length_m(path) >= math.dist(start, goal) - 1e-9
-        assert path_length_m(path) <= distances_at(fmap, field, np.array([goal]))[0] + 2 * RES * math.sqrt(2)
+        assert path_length_m(path) <= along_field + 2 * RES * math.sqrt(2)
 
 
 @pytest.mark.parametrize("goal", [(0.0, 0.0), (2.99, 1.99)])
