@@ -8,6 +8,7 @@
     syt-offboard bench stereo --views DIR --json           SAD and SGBM on rendered views of rooms
     syt-offboard calibrate-detector --detector sift --target-picture P --out TABLE.json
     syt-offboard experiment --preset paper --out DIR [--baselines] [--jobs N]
+    syt-offboard compare BASE_DIR NEW_DIR [--json]  two sweeps of one grid, paired run for run
     syt-offboard fuzz --cases N [--json]            every decoder; --live: malformed queries to an agent
     syt-offboard compile                            the numba kernels into numba's cache (make does it once)
 """
@@ -225,6 +226,25 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- two sweeps compared ---------------------------------------------------------------------------
+
+def _compare(args: argparse.Namespace) -> int:
+    from offboard.experiments.comparison import compare, comparison_json, comparison_md, load_sweep
+
+    try:
+        base, new = load_sweep(args.base), load_sweep(args.new)
+    except (OSError, KeyError, ValueError) as exc:  # a missing folder, or a results.csv that is not one
+        log.error("compare: %s", exc)
+        return 2
+    result = compare(base, new, str(args.base), str(args.new))
+    if not result.groups:
+        log.error("compare: %s and %s have no run in common (the same method, cost, prior, world, start, "
+                  "target and seed)", args.base, args.new)
+        return 2
+    sys.stdout.write(json.dumps(comparison_json(result)) + "\n" if args.json else comparison_md(result))
+    return 0
+
+
 # --- numba's cache --------------------------------------------------------------------------------
 
 def _compile(args: argparse.Namespace) -> int:
@@ -268,6 +288,11 @@ def _parser() -> argparse.ArgumentParser:
     experiment = sub.add_parser("experiment", help="run a grid of searches (the report's Tables 2 and 3, baselines)")
     harness.add_arguments(experiment)
     experiment.set_defaults(func=_experiment)
+    comparing = sub.add_parser("compare", help="two sweeps of one grid (experiment --out folders), paired run for run")
+    comparing.add_argument("base", type=Path, metavar="BASE_DIR")
+    comparing.add_argument("new", type=Path, metavar="NEW_DIR")
+    comparing.add_argument("--json", action="store_true", help="print one JSON object instead of Markdown")
+    comparing.set_defaults(func=_compare)
     bench = sub.add_parser("bench", help="measure a part; prints one JSON object")
     bench.add_argument("what", choices=("perception", "planner", "navigation", "safety", "checkpoint", "stereo"))
     bench.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")

@@ -284,10 +284,10 @@ def variants(rows: list[dict]) -> list[tuple[str, list[dict]]]:
     order = {p: i for i, p in enumerate(dict.fromkeys(r["prior"] for r in rows))}
     for r in sorted(rows, key=lambda r: (r["method"] != "syt", r["cost"] or 0, order[r["prior"]])):
         groups.setdefault((r["method"], r["cost"], r["prior"]), []).append(r)
-    return [(_variant_name(*key), members) for key, members in groups.items()]
+    return [(variant_name(*key), members) for key, members in groups.items()]
 
 
-def _variant_name(method: str, cost: float | None, prior: str) -> str:
+def variant_name(method: str, cost: float | None, prior: str) -> str:
     return f"SYT cost {cost:g}, {prior}" if method == "syt" else f"{method}, {prior}"
 
 
@@ -307,7 +307,7 @@ def _scenario(row: dict) -> tuple:
     return row["world"], row["start"], row["target"], row["prior"], row["seed"]
 
 
-def _placement(row: dict) -> tuple:
+def placement(row: dict) -> tuple:
     """What two methods or two priors are paired on: world, start, target and seed (the seed last)."""
     return row["world"], row["start"], row["target"], row["seed"]
 
@@ -339,7 +339,7 @@ def spl_margins(rows: list[dict], cost: int = 3) -> list[SplMargin]:
     baseline's", with its standard error and its spread over seeds. A baseline that never ran with
     SYT's prior is paired by its runs with the one prior it ran with, which the margin names."""
     def spl(method: str, prior: str) -> dict[tuple, float]:
-        return {_placement(r): r["spl"] or 0.0 for r in rows
+        return {placement(r): r["spl"] or 0.0 for r in rows
                 if r["method"] == method and r["prior"] == prior and (method != "syt" or r["cost"] == cost)}
 
     out = []
@@ -356,19 +356,19 @@ def spl_margins(rows: list[dict], cost: int = 3) -> list[SplMargin]:
             by_seed = tuple((seed, statistics.fmean([d for s, d in diffs.items() if s[-1] == seed]))
                             for seed in sorted({s[-1] for s in common}))
             out.append(SplMargin(name, prior, their_prior, len(common), statistics.fmean(syt[s] for s in common),
-                                 statistics.fmean(theirs[s] for s in common), _stderr(diffs), by_seed))
+                                 statistics.fmean(theirs[s] for s in common), paired_stderr(diffs), by_seed))
     return out
 
 
-def _stderr(diffs: dict[tuple, float]) -> float | None:
-    """The standard error of the mean of paired differences keyed by placement (:func:`_placement`),
+def paired_stderr(diffs: dict[tuple, float]) -> float | None:
+    """The standard error of the mean of paired differences keyed by placement (:func:`placement`),
     each scenario (world × start × target) one sample, its seeds averaged: a seed repeats a scenario
     almost exactly (the same room, start and target; only the sensors' noise differs), so seeds are
     not independent samples, and counting them as such understates the error (on `test`, 120 runs of
     40 scenarios: 0.038 where it is 0.063). None below two scenarios."""
     seeds: dict[tuple, list[float]] = {}
-    for placement, difference in diffs.items():
-        seeds.setdefault(placement[:-1], []).append(difference)
+    for key, difference in diffs.items():
+        seeds.setdefault(key[:-1], []).append(difference)
     means = [statistics.fmean(v) for v in seeds.values()]
     return statistics.stdev(means) / math.sqrt(len(means)) if len(means) > 1 else None
 
@@ -402,7 +402,7 @@ class PriorGain:
 def prior_gains(rows: list[dict], reference: str = "uniform") -> list[PriorGain]:
     """What each prior buys SYT over ``reference``, paired per scenario: the issue's priors "against
     uniform, reported as SPL and looks"."""
-    syt = {(r["cost"], r["prior"], *_placement(r)): r for r in rows if r["method"] == "syt"}
+    syt = {(r["cost"], r["prior"], *placement(r)): r for r in rows if r["method"] == "syt"}
     out = []
     for cost, prior in dict.fromkeys(key[:2] for key in syt):
         pairs = [(run, syt[(cost, reference, *key[2:])]) for key, run in syt.items()
@@ -410,9 +410,9 @@ def prior_gains(rows: list[dict], reference: str = "uniform") -> list[PriorGain]
         if prior == reference or not pairs:
             continue
         both = [(a["actions"], b["actions"]) for a, b in pairs if a["success"] and b["success"]]
-        diffs = {_placement(a): (a["spl"] or 0.0) - (b["spl"] or 0.0) for a, b in pairs}
+        diffs = {placement(a): (a["spl"] or 0.0) - (b["spl"] or 0.0) for a, b in pairs}
         out.append(PriorGain(cost, prior, reference, len(pairs), statistics.fmean(a["spl"] or 0.0 for a, _ in pairs),
-                             statistics.fmean(b["spl"] or 0.0 for _, b in pairs), _stderr(diffs), len(both),
+                             statistics.fmean(b["spl"] or 0.0 for _, b in pairs), paired_stderr(diffs), len(both),
                              _mean([a for a, _ in both]), _mean([b for _, b in both])))
     return out
 

@@ -1,0 +1,183 @@
+"""Two sweeps of one grid, paired run for run: what a change to the search did.
+
+``syt-offboard compare BASE NEW`` reads each folder's ``results.csv`` and pairs the runs both hold
+(method, cost function, prior, world, start, target, seed). With a fixed ``planned_processing_s`` a
+run repeats exactly, so a run that changed, changed because of what differs between the sweeps (the
+code or the configuration). SPL is paired as the report pairs SYT with a baseline: a failure counts
+0, and its standard error counts each scenario once (:func:`~offboard.experiments.report.paired_stderr`).
+Looks and distance are over the runs both sweeps found. The runs are also grouped by SPL's shortest
+path (:func:`~offboard.experiments.report.distance_group`), where a change near the target and one
+far from it can cancel out.
+
+Planning time is the one figure the machine's load moves from day to day, so its pairing is only
+fair between sweeps run on the same machine on the same day.
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from offboard.experiments.calibration import cell
+from offboard.experiments.report import distance_group, load_results, paired_stderr, placement, variant_name
+
+RESULTS_FILE = "results.csv"
+OUTCOME = ("success", "actions", "distance_m", "spl")  # a run whose outcome differs in any of these changed
+
+
+@dataclass(frozen=True)
+class Side:
+    """One sweep's figures on the paired runs."""
+
+    found: int  # runs that succeeded
+    spl: float  # over all paired runs, a failure counting 0
+    looks: float | None  # over the runs both sweeps found
+    distance_m: float | None  # likewise
+
+
+@dataclass(frozen=True)
+class PairedGroup:
+    """A variant's paired runs, or those of one distance group of it."""
+
+    variant: str  # as the report names it: "SYT cost 3, uniform", "exhaustive, uniform"
+    group: str  # "all", or a distance group
+    runs: int
+    changed: int  # runs whose outcome (:data:`OUTCOME`) differs
+    base: Side
+    new: Side
+    spl_stderr: float | None  # of the paired SPL difference; None below two scenarios
+
+    @property
+    def spl_difference(self) -> float:
+        return self.new.spl - self.base.spl
+
+
+@dataclass(frozen=True)
+class PairedLatency:
+    """Planning time per decision, paired per run: each run's 95th percentile."""
+
+    variant: str
+    runs: int
+    base_median_ms: float  # the median run's 95th percentile
+    new_median_ms: float
+    base_p95_ms: float  # the 95th percentile of the runs' 95th percentiles, the report's figure
+    new_p95_ms: float
+    difference_ms: float  # mean of new − base per run
+    stderr_ms: float | None  # counting each scenario once, as for SPL
+
+
+@dataclass(frozen=True)
+class Comparison:
+    base: str
+    new: str
+    groups: tuple[PairedGroup, ...]
+    latency: tuple[PairedLatency, ...]
+    only_base: int  # runs in one sweep only: not compared
+    only_new: int
+
+
+def load_sweep(folder: Path) -> list[dict]:
+    """The runs of the sweep written to ``folder`` (its ``results.csv``)."""
+    results = Path(folder) / RESULTS_FILE
+    if not results.is_file():
+        raise FileNotFoundError(f"{folder}: no {RESULTS_FILE} here; give a folder that `experiment --out` wrote")
+    return load_results(results)
+
+
+def compare(base_rows: list[dict], new_rows: list[dict], base: str = "base", new: str = "new") -> Comparison:
+    """Pair the runs of two sweeps and compare them per variant, in all and per distance group."""
+    base_runs, new_runs = ({_run_key(r): r for r in rows} for rows in (base_rows, new_rows))
+    common = [k for k in base_runs if k in new_runs]
+    pairs: dict[str, list[tuple[dict, dict]]] = {}
+    for key in common:
+        pairs.setdefault(variant_name(*key[:3]), []).append((base_runs[key], new_runs[key]))
+    groups, latency = [], []
+    for variant, both in pairs.items():
+        groups.append(_paired(variant, "all", both))
+        by_distance: dict[str, list[tuple[dict, dict]]] = {}
+        for a, b in sorted(both, key=lambda pair: _shortest_m(pair[0])):  # the groups from the nearest
+            by_distance.setdefault(distance_group(a), []).append((a, b))
+        groups += [_paired(variant, name, members) for name, members in by_distance.items()]
+        timed = _paired_latency(variant, both)
+        if timed:
+            latency.append(timed)
+    return Comparison(base, new, tuple(groups), tuple(latency), len(base_runs) - len(common),
+                      len(new_runs) - len(common))
+
+
+def _run_key(row: dict) -> tuple:
+    return row["method"], row["cost"] if row["method"] == "syt" else None, row["prior"], *placement(row)
+
+
+def _shortest_m(row: dict) -> float:
+    return np.inf if row["shortest_path_m"] is None else row["shortest_path_m"]
+
+
+def _paired(variant: str, group: str, pairs: list[tuple[dict, dict]]) -> PairedGroup:
+    found_both = [(a, b) for a, b in pairs if a["success"] and b["success"]]
+
+    def side(pick: Callable[[tuple[dict, dict]], dict]) -> Side:
+        mine = [pick(p) for p in pairs]
+        return Side(sum(r["success"] for r in mine), statistics.fmean(r["spl"] or 0.0 for r in mine),
+                    *(_mean([pick(p)[column] for p in found_both]) for column in ("actions", "distance_m")))
+
+    diffs = {placement(a): (b["spl"] or 0.0) - (a["spl"] or 0.0) for a, b in pairs}
+    changed = sum(any(a[c] != b[c] for c in OUTCOME) for a, b in pairs)
+    return PairedGroup(variant, group, len(pairs), changed, side(lambda p: p[0]), side(lambda p: p[1]),
+                       paired_stderr(diffs))
+
+
+def _paired_latency(variant: str, pairs: list[tuple[dict, dict]]) -> PairedLatency | None:
+    timed = [(a["planning_ms_p95"], b["planning_ms_p95"], placement(a)) for a, b in pairs
+             if a["planning_ms_p95"] is not None and b["planning_ms_p95"] is not None]
+    if not timed:
+        return None
+    base, new = np.array([t[0] for t in timed]), np.array([t[1] for t in timed])
+    return PairedLatency(variant, len(timed), float(np.median(base)), float(np.median(new)),
+                         float(np.percentile(base, 95)), float(np.percentile(new, 95)), float(np.mean(new - base)),
+                         paired_stderr({key: b - a for a, b, key in timed}))
+
+
+def _mean(values: list) -> float | None:
+    return statistics.fmean(values) if values else None
+
+
+# --- output ----------------------------------------------------------------------------------------
+
+def comparison_json(c: Comparison) -> dict:
+    """The comparison as one JSON object (differences included, so a tool need not recompute them)."""
+    return {"base": c.base, "new": c.new, "only_base": c.only_base, "only_new": c.only_new,
+            "groups": [{**asdict(g), "spl_difference": g.spl_difference} for g in c.groups],
+            "latency": [asdict(t) for t in c.latency]}
+
+
+def comparison_md(c: Comparison) -> str:
+    """The comparison as Markdown: one table of outcomes, one of planning time."""
+    lines = [f"Paired run for run: base `{c.base}`, new `{c.new}`. SPL over all paired runs (a failure counts 0), "
+             "its difference's standard error counting each scenario once; looks and distance over the runs "
+             "both found.", "",
+             "| Variant | Runs | Changed | Found, base / new | SPL, base → new | Difference (SE) | Looks | "
+             "Distance (m) |", "|---" * 8 + "|"]
+    for g in c.groups:
+        name = g.variant if g.group == "all" else f"… {g.group}"
+        stderr = "" if g.spl_stderr is None else f" ({g.spl_stderr:.3f})"
+        lines.append(f"| {name} | {g.runs} | {g.changed} | {g.base.found} / {g.new.found} | "
+                     f"{g.base.spl:.3f} → {g.new.spl:.3f} | {g.spl_difference:+.3f}{stderr} | "
+                     f"{cell(g.base.looks, 1)} → {cell(g.new.looks, 1)} | "
+                     f"{cell(g.base.distance_m)} → {cell(g.new.distance_m)} |")
+    if c.latency:
+        lines += ["", "Planning time per decision, each run's 95th percentile (fair only between sweeps run on the "
+                      "same machine the same day):", "",
+                  "| Variant | Runs | Median run, base → new (ms) | 95th percentile of runs, base → new (ms) | "
+                  "Paired difference (SE) |", "|---" * 5 + "|"]
+        for t in c.latency:
+            stderr = "" if t.stderr_ms is None else f" ({t.stderr_ms:.1f})"
+            lines.append(f"| {t.variant} | {t.runs} | {t.base_median_ms:.0f} → {t.new_median_ms:.0f} | "
+                         f"{t.base_p95_ms:.0f} → {t.new_p95_ms:.0f} | {t.difference_ms:+.1f}{stderr} |")
+    if c.only_base or c.only_new:
+        lines += ["", f"Not compared: {c.only_base} runs only in base, {c.only_new} only in new."]
+    return "\n".join(lines) + "\n"

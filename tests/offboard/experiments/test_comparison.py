@@ -1,0 +1,103 @@
+"""Two sweeps compared run for run: what changed, by how much, with an error that counts scenarios once."""
+
+from __future__ import annotations
+
+import json
+import logging
+import statistics
+from pathlib import Path
+
+import pytest
+
+from offboard.cli import main
+from offboard.experiments.comparison import compare, load_sweep
+from offboard.experiments.report import append_row
+
+# (world, start, shortest path): three scenarios, one near, one middling, one far
+SCENARIOS = (("office", "1,1,0", 0.8), ("office", "5,1,90", 2.0), ("paper-lab", "4.5,0.6,90", 4.0))
+
+
+def _write(folder: Path, outcomes: dict[tuple, tuple], method: str = "syt") -> Path:
+    """A results.csv holding one run per (scenario index, seed): (success, SPL, looks, distance, p95 ms)."""
+    folder.mkdir(exist_ok=True)
+    for (index, seed), (success, spl, looks, distance, p95) in outcomes.items():
+        world, start, shortest = SCENARIOS[index]
+        append_row(folder / "results.csv", {
+            "method": method, "world": world, "start": start, "target": "own", "cost": 3 if method == "syt" else "",
+            "prior": "uniform", "seed": seed, "found": success, "success": success, "spl": spl if success else 0.0,
+            "actions": looks, "distance_m": distance, "shortest_path_m": shortest, "planning_ms_p95": p95,
+            "key": f"{method}-{index}-{seed}"})
+    return folder
+
+
+BASE = {(0, 0): (True, 0.9, 10, 1.0, 60.0), (0, 1): (True, 0.9, 10, 1.0, 70.0),
+        (1, 0): (True, 0.7, 20, 3.0, 80.0), (1, 1): (True, 0.6, 22, 3.5, 90.0),
+        (2, 0): (True, 0.8, 30, 5.0, 100.0), (2, 1): (True, 0.8, 30, 5.0, 110.0)}
+
+
+def _changed() -> dict[tuple, tuple]:
+    """The near scenario loses on both seeds, one middling run fails, and a run only the new sweep has."""
+    new = dict(BASE)
+    new[0, 0] = (True, 0.5, 14, 2.0, 50.0)
+    new[0, 1] = (True, 0.6, 12, 1.6, 60.0)
+    new[1, 1] = (False, 0.0, 40, 9.0, 95.0)
+    new[2, 2] = (True, 0.8, 30, 5.0, 100.0)
+    return new
+
+
+def test_runs_are_paired_and_a_change_shows_with_an_error_counting_each_scenario_once(tmp_path):
+    base, new = load_sweep(_write(tmp_path / "base", BASE)), load_sweep(_write(tmp_path / "new", _changed()))
+    result = compare(base, new)
+    every, *by_distance = [g for g in result.groups if g.variant == "SYT cost 3, uniform"]
+    assert (every.group, every.runs, every.changed, result.only_base, result.only_new) == ("all", 6, 3, 0, 1)
+    assert every.base.spl == pytest.approx(statistics.fmean([0.9, 0.9, 0.7, 0.6, 0.8, 0.8]))
+    assert every.spl_difference == pytest.approx((-0.4 - 0.3 - 0.6) / 6)
+    scenario_means = [(-0.4 - 0.3) / 2, -0.6 / 2, 0.0]  # seeds averaged: three samples, not six
+    assert every.spl_stderr == pytest.approx(statistics.stdev(scenario_means) / 3 ** 0.5)
+    assert (every.base.found, every.new.found) == (6, 5)
+    assert every.new.looks == pytest.approx(statistics.fmean([14, 12, 20, 30, 30]))  # the failed run's pair left out
+    assert every.base.looks == pytest.approx(statistics.fmean([10, 10, 20, 30, 30]))
+    assert [(g.group, g.runs, g.changed) for g in by_distance] == [
+        ("under 1.5 m", 2, 2), ("1.5 m to 3 m", 2, 1), ("3 m or more", 2, 0)]
+    assert by_distance[2].spl_difference == 0.0 and by_distance[2].spl_stderr is None  # one scenario: no error
+
+
+def test_planning_time_is_paired_per_run(tmp_path):
+    base, new = load_sweep(_write(tmp_path / "base", BASE)), load_sweep(_write(tmp_path / "new", _changed()))
+    (timing,) = compare(base, new).latency
+    assert timing.runs == 6 and timing.base_median_ms == 85.0 and timing.new_median_ms == 87.5
+    assert timing.difference_ms == pytest.approx((-10 - 10 + 0 + 5 + 0 + 0) / 6)
+    assert timing.base_p95_ms == pytest.approx(107.5)  # the report's 95th percentile of the runs' own
+
+
+def test_methods_are_compared_apart_and_an_unchanged_one_shows_no_change(tmp_path):
+    _write(tmp_path / "base", BASE)
+    _write(tmp_path / "base", BASE, method="exhaustive")
+    _write(tmp_path / "new", _changed())
+    _write(tmp_path / "new", BASE, method="exhaustive")
+    result = compare(load_sweep(tmp_path / "base"), load_sweep(tmp_path / "new"))
+    exhaustive = next(g for g in result.groups if g.variant == "exhaustive, uniform" and g.group == "all")
+    assert exhaustive.runs == 6 and exhaustive.changed == 0 and exhaustive.spl_difference == 0.0
+    assert {g.variant for g in result.groups} == {"SYT cost 3, uniform", "exhaustive, uniform"}
+
+
+def test_the_command_prints_json_and_markdown(tmp_path, capsys):
+    base, new = _write(tmp_path / "base", BASE), _write(tmp_path / "new", _changed())
+    assert main(["compare", str(base), str(new), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    first = printed["groups"][0]
+    assert first["group"] == "all" and first["spl_difference"] == pytest.approx(-1.3 / 6) and printed["only_new"] == 1
+    assert main(["compare", str(base), str(new)]) == 0
+    markdown = capsys.readouterr().out
+    assert "| SYT cost 3, uniform | 6 | 3 | 6 / 5 | 0.783 → 0.567 | -0.217 (0.109) |" in markdown
+    assert "Not compared: 0 runs only in base, 1 only in new." in markdown
+
+
+def test_the_command_names_a_folder_without_results_and_sweeps_with_nothing_in_common(tmp_path, caplog):
+    base = _write(tmp_path / "base", BASE)
+    caplog.set_level(logging.ERROR)
+    assert main(["compare", str(base), str(tmp_path / "missing")]) == 2
+    assert f"{tmp_path / 'missing'}: no results.csv here" in caplog.text
+    other = _write(tmp_path / "other", BASE, method="frontier")
+    assert main(["compare", str(base), str(other)]) == 2
+    assert "no run in common" in caplog.text
