@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from offboard.experiments.calibration import cell
-from offboard.experiments.report import distance_group, load_results, paired_stderr, placement, variant_name
+from offboard.experiments.report import distance_group, load_results, mean_of, paired_stderr, placement, variant_name
 
 RESULTS_FILE = "results.csv"
 OUTCOME = ("success", "actions", "distance_m", "spl")  # a run whose outcome differs in any of these changed
@@ -123,7 +123,7 @@ def _paired(variant: str, group: str, pairs: list[tuple[dict, dict]]) -> PairedG
     def side(pick: Callable[[tuple[dict, dict]], dict]) -> Side:
         mine = [pick(p) for p in pairs]
         return Side(sum(r["success"] for r in mine), statistics.fmean(r["spl"] or 0.0 for r in mine),
-                    *(_mean([pick(p)[column] for p in found_both]) for column in ("actions", "distance_m")))
+                    *(mean_of([pick(p)[column] for p in found_both]) for column in ("actions", "distance_m")))
 
     diffs = {placement(a): (b["spl"] or 0.0) - (a["spl"] or 0.0) for a, b in pairs}
     changed = sum(any(a[c] != b[c] for c in OUTCOME) for a, b in pairs)
@@ -140,10 +140,6 @@ def _paired_latency(variant: str, pairs: list[tuple[dict, dict]]) -> PairedLaten
     return PairedLatency(variant, len(timed), float(np.median(base)), float(np.median(new)),
                          float(np.percentile(base, 95)), float(np.percentile(new, 95)), float(np.mean(new - base)),
                          paired_stderr({key: b - a for a, b, key in timed}))
-
-
-def _mean(values: list) -> float | None:
-    return statistics.fmean(values) if values else None
 
 
 # --- output ----------------------------------------------------------------------------------------

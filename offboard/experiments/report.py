@@ -123,7 +123,8 @@ def _minutes(seconds: float | None) -> float | None:
     return None if seconds is None else seconds / 60
 
 
-def _mean(values: list) -> float | None:
+def mean_of(values: list) -> float | None:
+    """The mean of the values that are not None (None if none is)."""
     values = [v for v in values if v is not None]
     return statistics.fmean(values) if values else None
 
@@ -134,7 +135,7 @@ def syt_tables(rows: list[dict]) -> Tables:
     for prior in PRIORS:
         cells = {c: [r for r in rows if r["method"] == "syt" and r["prior"] == prior and r["cost"] == c
                      and r["success"]] for c in COSTS}
-        out[prior] = {m: [_mean([r[m] for r in cells[c]]) for c in COSTS] for m in METRICS}
+        out[prior] = {m: [mean_of([r[m] for r in cells[c]]) for c in COSTS] for m in METRICS}
     return out
 
 
@@ -171,9 +172,9 @@ def _knowledge_and_actions(u: dict, k: dict) -> list[Verdict]:
     return [
         Verdict("Prior knowledge drastically accelerates the search (time, actions, distance).", ok1,
                 f"{n1}/12 cost×metric cells lower with knowledge; mean over costs: "
-                f"time {cell(_mean(u['time_min']))} → {cell(_mean(k['time_min']))} min, "
-                f"actions {cell(_mean(u['actions']))} → {cell(_mean(k['actions']))}, "
-                f"distance {cell(_mean(u['distance_m']))} → {cell(_mean(k['distance_m']))} m"),
+                f"time {cell(mean_of(u['time_min']))} → {cell(mean_of(k['time_min']))} min, "
+                f"actions {cell(mean_of(u['actions']))} → {cell(mean_of(k['actions']))}, "
+                f"distance {cell(mean_of(u['distance_m']))} → {cell(mean_of(k['distance_m']))} m"),
         Verdict("The cost function has no significant effect on the number of actions.", ok2,
                 f"spread (max − min) / mean of the four costs' mean actions: no knowledge {cell(spreads[0])}, "
                 f"knowledge {cell(spreads[1])} (criterion ≤ {SAME_ACTIONS:g})"),
@@ -264,17 +265,17 @@ def _stats(name: str, rows: list[dict]) -> MethodStats:
     ok = [r for r in rows if r["success"]]
     p50 = [r["planning_ms_p50"] for r in rows if r["planning_ms_p50"] is not None]
     p95 = [r["planning_ms_p95"] for r in rows if r["planning_ms_p95"] is not None]
-    return MethodStats(name, len(rows), len(ok), _mean([r["spl"] or 0.0 for r in rows]),
-                       *(_mean([r[m] for r in ok]) for m in ("time_min", "actions", "distance_m")),
+    return MethodStats(name, len(rows), len(ok), mean_of([r["spl"] or 0.0 for r in rows]),
+                       *(mean_of([r[m] for r in ok]) for m in ("time_min", "actions", "distance_m")),
                        statistics.median(p50) if p50 else None, float(np.percentile(p95, 95)) if p95 else None,
-                       _mean([r["motion_min"] for r in ok]), _all_measured(ok, "processing_min"),
+                       mean_of([r["motion_min"] for r in ok]), _all_measured(ok, "processing_min"),
                        _all_measured(ok, "glances"), scope(rows))
 
 
 def _all_measured(rows: list[dict], column: str) -> float | None:
     """The mean of ``column`` if every run measured it (a partial mean would not compare), else None."""
     values = [r.get(column) for r in rows]  # a results.csv from before the column has none
-    return None if None in values else _mean(values)
+    return None if None in values else mean_of(values)
 
 
 def variants(rows: list[dict]) -> list[tuple[str, list[dict]]]:
@@ -413,7 +414,7 @@ def prior_gains(rows: list[dict], reference: str = "uniform") -> list[PriorGain]
         diffs = {placement(a): (a["spl"] or 0.0) - (b["spl"] or 0.0) for a, b in pairs}
         out.append(PriorGain(cost, prior, reference, len(pairs), statistics.fmean(a["spl"] or 0.0 for a, _ in pairs),
                              statistics.fmean(b["spl"] or 0.0 for _, b in pairs), paired_stderr(diffs), len(both),
-                             _mean([a for a, _ in both]), _mean([b for _, b in both])))
+                             mean_of([a for a, _ in both]), mean_of([b for _, b in both])))
     return out
 
 
@@ -424,7 +425,7 @@ def paired_times(rows: list[dict], cost: int = 3) -> list[tuple[str, int, float 
     for name in dict.fromkeys(r["method"] for r in rows if r["method"] != "syt"):
         mine = {_scenario(r): r["time_min"] for r in rows if r["method"] == name and r["success"]}
         common = sorted(set(syt) & set(mine))
-        out.append((name, len(common), _mean([syt[s] for s in common]), _mean([mine[s] for s in common])))
+        out.append((name, len(common), mean_of([syt[s] for s in common]), mean_of([mine[s] for s in common])))
     return out
 
 
@@ -553,7 +554,7 @@ def _time_md(rows: list[dict]) -> list[str]:
     if len(measured) < len(ok):
         lines[-1] += (f" **{len(ok) - len(measured)} of {len(ok)} successful runs did not measure processing**: their "
                       "time is motion only and understates the report's kind of minutes.")
-    per_action = _mean([60 * r["processing_min"] / r["actions"] for r in measured if r["actions"]])
+    per_action = mean_of([60 * r["processing_min"] / r["actions"] for r in measured if r["actions"]])
     if per_action is not None:
         lines[-1] += (f" Ours: {per_action:.1f} s of processing per action (mean over {len(measured)} successful runs; "
                       f"{scope(measured)}).")
@@ -622,7 +623,7 @@ def _wall_md(rows: list[dict], sweep: tuple[int, float, int] | None = None) -> l
     ran = [] if sweep is None else [f"The sweep that wrote this report ran {sweep[0]} runs in **{sweep[1] / 60:.1f} min** "
                                     f"of wall time with {sweep[2]} jobs.", ""]
     methods = dict.fromkeys(r["method"] for r in rows)
-    by_method = {m: _mean([r["run_wall_s"] for r in rows if r["method"] == m]) for m in methods}
+    by_method = {m: mean_of([r["run_wall_s"] for r in rows if r["method"] == m]) for m in methods}
     return ["## Wall time", "", *ran, f"{len(walls)} runs took {sum(walls) / 60:.1f} min of worker wall time in all "
             f"(mean {statistics.fmean(walls):.0f} s, median {statistics.median(walls):.0f} s, max {max(walls):.0f} s "
             "per run; a worker's first run includes its agent's start-up); with N jobs the sweep's wall time is about "
