@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from offboard.experiments.calibration import cell
-from offboard.experiments.report import distance_group, load_results, mean_of, paired_stderr, placement, variant_name
+from offboard.experiments.report import by_distance, load_results, mean_of, paired_stderr, placement, variant_name
 
 RESULTS_FILE = "results.csv"
 OUTCOME = ("success", "actions", "distance_m", "spl")  # a run whose outcome differs in any of these changed
@@ -98,10 +98,8 @@ def compare(base_rows: list[dict], new_rows: list[dict], base: str = "base", new
     groups, latency = [], []
     for variant, both in pairs.items():
         groups.append(_paired(variant, "all", both))
-        by_distance: dict[str, list[tuple[dict, dict]]] = {}
-        for a, b in sorted(both, key=lambda pair: _shortest_m(pair[0])):  # the groups from the nearest
-            by_distance.setdefault(distance_group(a), []).append((a, b))
-        groups += [_paired(variant, name, members) for name, members in by_distance.items()]
+        groups += [_paired(variant, name, [(a, new_runs[_run_key(a)]) for a in members])
+                   for name, members in by_distance([a for a, _ in both]).items()]
         timed = _paired_latency(variant, both)
         if timed:
             latency.append(timed)
@@ -111,10 +109,6 @@ def compare(base_rows: list[dict], new_rows: list[dict], base: str = "base", new
 
 def _run_key(row: dict) -> tuple:
     return row["method"], row["cost"] if row["method"] == "syt" else None, row["prior"], *placement(row)
-
-
-def _shortest_m(row: dict) -> float:
-    return np.inf if row["shortest_path_m"] is None else row["shortest_path_m"]
 
 
 def _paired(variant: str, group: str, pairs: list[tuple[dict, dict]]) -> PairedGroup:

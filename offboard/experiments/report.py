@@ -496,12 +496,18 @@ def distance_group(row: dict) -> str:
     return f"{NEAR_M:g} m to {FAR_M:g} m" if shortest < FAR_M else f"{FAR_M:g} m or more"
 
 
-def _by_distance_md(rows: list[dict]) -> list[str]:
+def by_distance(rows: list[dict]) -> dict[str, list[dict]]:
+    """The runs in their :func:`distance_group`, the groups from the nearest target to the farthest
+    (those no position sees last)."""
     groups: dict[str, list[dict]] = {}
     for r in sorted(rows, key=lambda r: math.inf if r["shortest_path_m"] is None else r["shortest_path_m"]):
         groups.setdefault(distance_group(r), []).append(r)
+    return groups
+
+
+def _by_distance_md(rows: list[dict]) -> list[str]:
     return ["## By how far the target was", "", "Runs grouped by SPL's shortest path from the start (looks, "
-            "distance and times over successful runs; success and SPL over all).", ""] + _groups_md(groups)
+            "distance and times over successful runs; success and SPL over all).", ""] + _groups_md(by_distance(rows))
 
 
 def _priors_md(rows: list[dict]) -> list[str]:
