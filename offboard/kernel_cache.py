@@ -136,7 +136,7 @@ def _decide(scene: _Scene) -> None:
     floor map, every action scored on the coarsened map and belief."""
     floor = _floor(scene)
     here = (scene.pose.x_m, scene.pose.y_m)
-    scene.planner.plan_positions(scene.pose, floor, BASE.radius_m + NavigatorConfig().margin_m)
+    scene.planner.plan_positions(scene.pose, floor, NavigatorConfig().clearance_m(BASE))
     paths = grid_planner.path_lengths(floor, here, scene.planner.positions)
     scene.planner.decide(scene.pose, 0.0, 0.0, 0.0, scene.occupancy, paths)
 

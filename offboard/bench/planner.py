@@ -57,8 +57,9 @@ def _decide(planner: SearchPlanner, occupancy: OccupancyGrid, pose: Pose2D):
     :meth:`~OccupancyGrid.coarsened`."""
     with occupancy.edit():
         pass
-    floor = occupancy.floor_map(BASE.radius_m, BASE.height_m)
-    planner.plan_positions(pose, floor, BASE.radius_m + NavigatorConfig().margin_m)
+    clearance = NavigatorConfig().clearance_m(BASE)
+    floor = occupancy.floor_map(clearance, BASE.height_m)
+    planner.plan_positions(pose, floor, clearance)
     paths = grid_planner.path_lengths(floor, (pose.x_m, pose.y_m), planner.positions)
     return planner.decide(pose, 0.0, 0.0, 0.0, occupancy, paths)
 

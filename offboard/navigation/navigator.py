@@ -52,6 +52,7 @@ from offboard.robot.robot_client import CommandError, RobotClient
 from offboard.perception.stereo import StereoConfig, StereoMatcher
 from offboard.navigation.tangent_bug import BugConfig, BugStep, TangentBug
 from shared.geometry import Pose2D
+from shared.limits import BaseLimits
 from shared.messages import Capture
 
 log = logging.getLogger(__name__)
@@ -89,6 +90,11 @@ class NavigatorConfig:
     # ahead of the tilted head, so each move ends where the last look reached the floor
     bug: BugConfig = field(default_factory=lambda: BugConfig(sensor_range_m=12.0, step_m=0.6))
     match: MatchConfig = MatchConfig()
+
+    def clearance_m(self, base: BaseLimits, squeeze: bool = False) -> float:
+        """How far the base's centre keeps from a mapped obstacle: its radius and ``margin_m``, or with
+        ``squeeze`` its bare radius."""
+        return base.radius_m + (0.0 if squeeze else self.margin_m)
 
 
 @dataclass(frozen=True)
@@ -178,9 +184,8 @@ class Navigator:
         return self.occupancy.floor_map(self.clearance_m(squeeze), self._base.height_m)
 
     def clearance_m(self, squeeze: bool = False) -> float:
-        """How far the base's centre keeps from a mapped obstacle: its radius and ``margin_m``, or with
-        ``squeeze`` its bare radius."""
-        return self._base.radius_m + (0.0 if squeeze else self.config.margin_m)
+        """:meth:`NavigatorConfig.clearance_m` for this robot's base."""
+        return self.config.clearance_m(self._base, squeeze)
 
     # --- sensing -----------------------------------------------------------------------------------
 
