@@ -4,6 +4,7 @@ of a generated room go through the real matcher and occupancy map."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import replace
 
@@ -68,3 +69,17 @@ def test_without_the_gap_stereo_s_own_face_would_block_the_picture_s_facing(mapp
     world, occupancy = mapped_target
     config = replace(SearchConfig(), blocked_facing_gap_m=0.0)
     assert _shares(world, occupancy, config, world.target.center_m())[_own_sector(world, config)] < 1.0
+
+
+def test_no_cube_round_the_picture_s_centre_loses_its_own_facing(mapped_target):
+    """The target's centre may lie anywhere in its cube, so the 26 cubes round it must keep the
+    picture's facing too; with a gap of 0.1 m stereo's own face blocked it in six of them here."""
+    world, occupancy = mapped_target
+
+    def own_shares(config: SearchConfig) -> list[float]:
+        around = itertools.product((-1, 0, 1), repeat=3)
+        return [_shares(world, occupancy, config, world.target.center_m() + np.array(d) * config.resolution_m)
+                [_own_sector(world, config)] for d in around]
+
+    assert min(own_shares(SearchConfig())) == 1.0
+    assert min(own_shares(replace(SearchConfig(), blocked_facing_gap_m=0.1))) < 1.0
