@@ -42,12 +42,13 @@ def mapped_target():
     return world, occupancy
 
 
-def _shares(world, occupancy, config: SearchConfig, point_m: np.ndarray) -> np.ndarray:
-    """Each facing's mass at ``point_m`` after the map is folded into a uniform belief, over the most."""
+def _shares(world, occupancy, config: SearchConfig, points_m: np.ndarray) -> np.ndarray:
+    """Each facing's mass at each of ``points_m`` (..., 3) after the map is folded into a uniform
+    belief, over that point's most: (..., facings)."""
     belief = TargetBelief(occupancy.grid, config.facing_sectors)
     fold_in_map(belief, occupancy, replace(config, empty_factor=1.0), world.target.size_m[0])
-    mass = belief.mass_by_facing()[tuple(occupancy.grid.index_of(point_m))]
-    return mass / mass.max()
+    mass = belief.mass_by_facing()[tuple(np.moveaxis(occupancy.grid.index_of(points_m), -1, 0))]
+    return mass / mass.max(axis=-1, keepdims=True)
 
 
 def _own_sector(world, config: SearchConfig) -> int:
@@ -76,10 +77,10 @@ def test_no_cube_round_the_picture_s_centre_loses_its_own_facing(mapped_target):
     picture's facing too; with a gap of 0.1 m stereo's own face blocked it in six of them here."""
     world, occupancy = mapped_target
 
-    def own_shares(config: SearchConfig) -> list[float]:
-        around = itertools.product((-1, 0, 1), repeat=3)
-        return [_shares(world, occupancy, config, world.target.center_m() + np.array(d) * config.resolution_m)
-                [_own_sector(world, config)] for d in around]
+    def own_shares(config: SearchConfig) -> np.ndarray:
+        steps = np.array(list(itertools.product((-1, 0, 1), repeat=3)))
+        around = world.target.center_m() + steps * config.resolution_m
+        return _shares(world, occupancy, config, around)[:, _own_sector(world, config)]
 
     assert min(own_shares(SearchConfig())) == 1.0
     assert min(own_shares(replace(SearchConfig(), blocked_facing_gap_m=0.1))) < 1.0
