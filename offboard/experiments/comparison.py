@@ -1,11 +1,14 @@
 """Two sweeps of one grid, paired run for run: what a change to the search did.
 
 ``syt-offboard compare BASE NEW`` reads each folder's ``results.csv`` and pairs the runs both hold
-(method, cost function, prior, world, start, target, seed). With a fixed ``planned_processing_s`` a
-run repeats exactly, so a run that changed, changed because of what differs between the sweeps (the
-code or the configuration). SPL is paired as the report pairs SYT with a baseline: a failure counts
-0, and its standard error counts each scenario once (:func:`~offboard.experiments.report.paired_stderr`).
-Looks and distance are over the runs both sweeps found. The runs are also grouped by SPL's shortest
+(method, cost function, prior, world, start, target, seed). A world is known by its file's name, so
+the same room given as ``fresh/room-1.toml`` in one sweep and by an absolute path in the other
+pairs; a sweep holding two worlds of one name from different folders pairs on the names as typed.
+With a fixed ``planned_processing_s`` a run repeats exactly, so a run that changed, changed because
+of what differs between the sweeps (the code or the configuration). SPL is paired as the report
+pairs SYT with a baseline: a failure counts 0, and its standard error counts each scenario once
+(:func:`~offboard.experiments.report.paired_stderr`). Looks and distance are over the runs both
+sweeps found. The runs are also grouped by SPL's shortest
 path (:func:`~offboard.experiments.report.distance_group`), where a change near the target and one
 far from it can cancel out.
 
@@ -90,7 +93,8 @@ def load_sweep(folder: Path) -> list[dict]:
 
 def compare(base_rows: list[dict], new_rows: list[dict], base: str = "base", new: str = "new") -> Comparison:
     """Pair the runs of two sweeps and compare them per variant, in all and per distance group."""
-    base_runs, new_runs = ({_run_key(r): r for r in rows} for rows in (base_rows, new_rows))
+    by_name = _names_are_unique(base_rows) and _names_are_unique(new_rows)
+    base_runs, new_runs = ({_run_key(r, by_name): r for r in rows} for rows in (base_rows, new_rows))
     common = [k for k in base_runs if k in new_runs]
     pairs: dict[str, list[tuple[dict, dict]]] = {}
     for key in common:
@@ -98,7 +102,7 @@ def compare(base_rows: list[dict], new_rows: list[dict], base: str = "base", new
     groups, latency = [], []
     for variant, both in pairs.items():
         groups.append(_paired(variant, "all", both))
-        groups += [_paired(variant, name, [(a, new_runs[_run_key(a)]) for a in members])
+        groups += [_paired(variant, name, [(a, new_runs[_run_key(a, by_name)]) for a in members])
                    for name, members in by_distance([a for a, _ in both]).items()]
         timed = _paired_latency(variant, both)
         if timed:
@@ -107,8 +111,20 @@ def compare(base_rows: list[dict], new_rows: list[dict], base: str = "base", new
                       len(new_runs) - len(common))
 
 
-def _run_key(row: dict) -> tuple:
-    return row["method"], row["cost"] if row["method"] == "syt" else None, row["prior"], *placement(row)
+def _world_name(world: str) -> str:
+    """A world as its file's name: ``dev/room-1000-1``, ``/x/fresh/room-1000-1.toml`` → ``room-1000-1``."""
+    return Path(world).name.removesuffix(".toml")
+
+
+def _names_are_unique(rows: list[dict]) -> bool:
+    worlds = {r["world"] for r in rows}
+    return len(worlds) == len({_world_name(w) for w in worlds})
+
+
+def _run_key(row: dict, by_name: bool) -> tuple:
+    world, *rest = placement(row)
+    return (row["method"], row["cost"] if row["method"] == "syt" else None, row["prior"],
+            _world_name(world) if by_name else world, *rest)
 
 
 def _paired(variant: str, group: str, pairs: list[tuple[dict, dict]]) -> PairedGroup:

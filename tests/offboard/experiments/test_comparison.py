@@ -17,16 +17,17 @@ from offboard.experiments.report import append_row
 SCENARIOS = (("office", "1,1,0", 0.8), ("office", "5,1,90", 2.0), ("paper-lab", "4.5,0.6,90", 4.0))
 
 
-def _write(folder: Path, outcomes: dict[tuple, tuple], method: str = "syt") -> Path:
-    """A results.csv holding one run per (scenario index, seed): (success, SPL, looks, distance, p95 ms)."""
+def _write(folder: Path, outcomes: dict[tuple, tuple], method: str = "syt", world_as=lambda world: world) -> Path:
+    """A results.csv holding one run per (scenario index, seed): (success, SPL, looks, distance, p95 ms);
+    ``world_as`` writes a scenario's world as a sweep given it otherwise would have recorded it."""
     folder.mkdir(exist_ok=True)
     for (index, seed), (success, spl, looks, distance, p95) in outcomes.items():
         world, start, shortest = SCENARIOS[index]
         append_row(folder / "results.csv", {
-            "method": method, "world": world, "start": start, "target": "own", "cost": 3 if method == "syt" else "",
+            "method": method, "world": world_as(world), "start": start, "target": "own", "cost": 3 if method == "syt" else "",
             "prior": "uniform", "seed": seed, "found": success, "success": success, "spl": spl if success else 0.0,
             "actions": looks, "distance_m": distance, "shortest_path_m": shortest, "planning_ms_p95": p95,
-            "key": f"{method}-{index}-{seed}"})
+            "key": f"{method}-{world_as(world)}-{index}-{seed}"})
     return folder
 
 
@@ -79,6 +80,21 @@ def test_methods_are_compared_apart_and_an_unchanged_one_shows_no_change(tmp_pat
     exhaustive = next(g for g in result.groups if g.variant == "exhaustive, uniform" and g.group == "all")
     assert exhaustive.runs == 6 and exhaustive.changed == 0 and exhaustive.spl_difference == 0.0
     assert {g.variant for g in result.groups} == {"SYT cost 3, uniform", "exhaustive, uniform"}
+
+
+def test_a_world_given_by_another_path_to_its_file_pairs_by_the_file_s_name(tmp_path):
+    base = load_sweep(_write(tmp_path / "base", BASE, world_as=lambda w: f"fresh/{w}.toml"))
+    new = load_sweep(_write(tmp_path / "new", _changed(), world_as=lambda w: f"/data/fresh/{w}.toml"))
+    every = next(g for g in compare(base, new).groups if g.group == "all")
+    assert (every.runs, every.changed) == (6, 3)
+
+
+def test_two_worlds_of_one_name_from_different_folders_are_not_taken_for_one(tmp_path):
+    for folder in ("a", "b"):  # the same scenarios in two rooms that share a file name
+        _write(tmp_path / "sweep", BASE, world_as=lambda w, folder=folder: f"{folder}/{w}.toml")
+    sweep = load_sweep(tmp_path / "sweep")
+    every = next(g for g in compare(sweep, sweep).groups if g.group == "all")
+    assert (every.runs, every.changed) == (12, 0)
 
 
 def test_the_command_prints_json_and_markdown(tmp_path, capsys):
