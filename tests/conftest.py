@@ -94,16 +94,21 @@ def sim_agent(tmp_path_factory) -> Iterator[tuple[LoopbackAgent, RobotClient]]:
         yield pair
 
 
-@pytest.fixture
-def lab_search(sim_agent) -> Search:
-    """A search in this process on the paper-lab agent: the bundled target, SIFT, a uniform prior, and
-    a planned processing time, so that its decisions repeat however loaded the machine is."""
-    _, robot = sim_agent
+def search_on(robot: RobotClient, dynamic: list | None = None) -> Search:
+    """A search in this process on ``robot``: the bundled target, SIFT, a uniform prior, the
+    ``dynamic`` priors (none by default), and a planned processing time, so that its decisions repeat
+    however loaded the machine is."""
     config = SearchConfig(planned_processing_s=0.45)
     model = TargetModel((load_picture("target", Path(".")),), (0.23, 0.23, 0.23))
     detector = make_detector("sift", model, robot.info().intrinsics.to_intrinsics())
     return Search(robot, config, {"sift": (detector, detectability_table("sift", detector, {}))},
-                  priors.uniform(VoxelGrid(config.room_m, config.resolution_m)), [])
+                  priors.uniform(VoxelGrid(config.room_m, config.resolution_m)), dynamic or [])
+
+
+@pytest.fixture
+def lab_search(sim_agent) -> Search:
+    """:func:`search_on` the paper-lab agent."""
+    return search_on(sim_agent[1])
 
 
 def floor_map(occupied: np.ndarray, radius_m: float = 0.0) -> FloorMap:

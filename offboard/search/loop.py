@@ -6,8 +6,9 @@ One :class:`Search` drives one robot until the target is found — the belief pu
 budget K is spent, or no reachable action is worth its time.
 
 Time is honest: every action's motion (robot clock: driving, slewing, capture) and its processing
-(wall clock: capture transfer, stereo, detection, mapping, belief update, planning) are measured
-and reported apart; the planner's t(f) includes the mean processing measured so far.
+(wall clock: capture transfer, stereo, detection, mapping, the belief's update and the dynamic
+priors', planning) are measured and reported apart; the planner's t(f) includes the mean processing
+measured so far.
 The environment is unknown: the planner never reads a world file, only the room's boundary
 (report §3.1: "we assume that boundaries of Ω are known exactly").
 
@@ -122,7 +123,7 @@ class SearchState:
     taken: set[int] = field(default_factory=set)  # settings looked at since the robot last moved
     retaken: set[int] = field(default_factory=set)  # ... of those, the ones already looked at again to confirm
     motion_s: float = 0.0  # robot clock: driving, slewing, capture
-    processing_s: float = 0.0  # wall clock: capture transfer, stereo, detection, mapping, update, planning
+    processing_s: float = 0.0  # wall clock: capture transfer, stereo, detection, mapping, updates, planning
     driving_s: float = 0.0  # moves between positions: robot clock, and processing unless planned_processing_s is set
     look_log: list[dict] = field(default_factory=list)  # per look: expected and realised P, times
     glances: int = 0  # frames the navigator took toward the motion, searched on the way (not looks)
@@ -317,14 +318,14 @@ class Search:
         self.state.actions += 1
         realised, found = self._interpret(obs, table)
         self.state.took(decision.setting, located=obs.target_m is not None)
-        processing_s = self._pending_processing_s + time.perf_counter() - started  # the wall clock's part
-        self._account(decision, obs, realised, motion_s, processing_s)
-        self.state.looks.append(LookTrace(obs.pose.x_m, obs.pose.y_m, decision.azimuth_rad,
-                                          math.degrees(decision.tilt_rad), table.range_m[1], found))
         for prior in self.dynamic_priors:  # looks only: a glance repeats much of the last one's view, and
             factor = prior(obs, self)  # saliency multiplies in whatever each image shows
             if factor is not None:
                 self.belief.reweight(factor)
+        processing_s = self._pending_processing_s + time.perf_counter() - started  # the wall clock's part
+        self._account(decision, obs, realised, motion_s, processing_s)
+        self.state.looks.append(LookTrace(obs.pose.x_m, obs.pose.y_m, decision.azimuth_rad,
+                                          math.degrees(decision.tilt_rad), table.range_m[1], found))
         self._record(obs, table)
 
     def _glance(self, capture: Capture, pose: Pose2D, disparity: np.ndarray) -> str:

@@ -1,0 +1,31 @@
+"""A look's processing time, as the planner's t(f) and the report count it, holds all of the look's
+work: here, the dynamic priors' update after it (it once fell outside the clock)."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+from conftest import search_on
+from offboard.planning.planner import Decision
+
+pytestmark = pytest.mark.integration
+
+PRIOR_S = 0.5  # a dynamic prior's update that takes this long (saliency's takes about 0.15 s)
+
+
+def test_a_look_s_processing_counts_the_dynamic_priors_update(sim_agent):
+    slow_from_look = 3  # the first look warms the caches up, the second is the one to compare with
+
+    def prior(obs, search) -> None:  # a factor of None leaves the belief as it is
+        if search.state.actions >= slow_from_look:
+            time.sleep(PRIOR_S)
+
+    search = search_on(sim_agent[1], [prior])
+    for setting, azimuth_deg in enumerate((90, 60, 120)):
+        search._look(Decision("look", "level", azimuth_rad=math.radians(azimuth_deg), tilt_rad=0.0, setting=setting))
+    looks = [look["processing_s"] for look in search.state.look_log]
+    assert sum(looks) == pytest.approx(search.state.processing_s, abs=1e-3)
+    assert looks[2] - looks[1] >= 0.8 * PRIOR_S, looks
