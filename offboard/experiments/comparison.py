@@ -8,9 +8,9 @@ With a fixed ``planned_processing_s`` a run repeats exactly, so a run that chang
 of what differs between the sweeps (the code or the configuration). SPL is paired as the report
 pairs SYT with a baseline: a failure counts 0, and its standard error counts each scenario once
 (:func:`~offboard.experiments.report.paired_stderr`). Looks and distance are over the runs both
-sweeps found. The runs are also grouped by SPL's shortest
-path (:func:`~offboard.experiments.report.distance_group`), where a change near the target and one
-far from it can cancel out.
+sweeps found. The runs are also grouped by SPL's shortest path
+(:func:`~offboard.experiments.report.distance_group`), where a change near the target and one far
+from it can cancel out.
 
 Planning time is the one figure the machine's load moves from day to day, so its pairing is only
 fair between sweeps run on the same machine on the same day.

@@ -24,10 +24,10 @@ def _write(folder: Path, outcomes: dict[tuple, tuple], method: str = "syt", worl
     for (index, seed), (success, spl, looks, distance, p95) in outcomes.items():
         world, start, shortest = SCENARIOS[index]
         append_row(folder / "results.csv", {
-            "method": method, "world": world_as(world), "start": start, "target": "own", "cost": 3 if method == "syt" else "",
-            "prior": "uniform", "seed": seed, "found": success, "success": success, "spl": spl if success else 0.0,
-            "actions": looks, "distance_m": distance, "shortest_path_m": shortest, "planning_ms_p95": p95,
-            "key": f"{method}-{world_as(world)}-{index}-{seed}"})
+            "method": method, "world": world_as(world), "start": start, "target": "own",
+            "cost": 3 if method == "syt" else "", "prior": "uniform", "seed": seed, "found": success,
+            "success": success, "spl": spl if success else 0.0, "actions": looks, "distance_m": distance,
+            "shortest_path_m": shortest, "planning_ms_p95": p95, "key": f"{method}-{world_as(world)}-{index}-{seed}"})
     return folder
 
 
