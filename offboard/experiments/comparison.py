@@ -117,6 +117,7 @@ def _world_name(world: str) -> str:
 
 
 def _names_are_unique(rows: list[dict]) -> bool:
+    """Whether no two of the sweep's worlds share a file name (then a name is a world)."""
     worlds = {r["world"] for r in rows}
     return len(worlds) == len({_world_name(w) for w in worlds})
 
