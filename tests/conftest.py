@@ -94,11 +94,11 @@ def sim_agent(tmp_path_factory) -> Iterator[tuple[LoopbackAgent, RobotClient]]:
         yield pair
 
 
-def search_on(robot: RobotClient, dynamic: list | None = None) -> Search:
+def search_on(robot: RobotClient, dynamic: list | None = None, config: SearchConfig | None = None) -> Search:
     """A search in this process on ``robot``: the bundled target, SIFT, a uniform prior, the
-    ``dynamic`` priors (none by default), and a planned processing time, so that its decisions repeat
-    however loaded the machine is."""
-    config = SearchConfig(planned_processing_s=0.45)
+    ``dynamic`` priors (none by default), and ``config`` (by default the defaults with a planned
+    processing time, so that its decisions repeat however loaded the machine is)."""
+    config = config or SearchConfig(planned_processing_s=0.45)
     model = TargetModel((load_picture("target", Path(".")),), (0.23, 0.23, 0.23))
     detector = make_detector("sift", model, robot.info().intrinsics.to_intrinsics())
     return Search(robot, config, {"sift": (detector, detectability_table("sift", detector, {}))},

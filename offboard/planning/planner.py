@@ -30,7 +30,8 @@ E(f) = P_Ψ(f) / t(f). When to stop looking here is the ``move_rule``:
 
 Eq. 9 is read with the detection probability of eq. 1 (Σ p·b), which is what the report's text
 calls it. Candidate positions are the report's grid vertices plus viewpoints aimed at the belief
-(:mod:`offboard.planning.viewpoints`).
+(:mod:`offboard.planning.viewpoints`). The settings are the report's two tilts; a search that they
+leave with nothing worth a look adds a tilt down once (:meth:`SearchPlanner.widen`) before it stops.
 """
 
 from __future__ import annotations
@@ -68,6 +69,8 @@ class PlannerConfig:
     leave_margin: float = field(default=3.0, metadata=bounds(1.0, 100.0))  # the "rate" rule leaves when a visit
     # finds this many times more per second than the best look here
     tilts_deg: tuple[float, ...] = (0.0, 30.0)  # the report's two tilts
+    # added once the tilts above leave nothing worth a look (widen); (): the search stops there
+    fallback_tilts_deg: tuple[float, ...] = (-30.0,)
     view_overlap: float = field(default=0.4, metadata=bounds(0.0, 0.9))  # between neighbouring settings
     same_position_m: float = field(default=0.5, metadata=bounds(0.0, 5.0))  # "here" for a candidate
     unknown_is_opaque: bool = False  # expected sensed spheres: unknown space hides what is behind it
@@ -95,21 +98,42 @@ class Decision:
 class SearchPlanner:
     def __init__(self, belief: TargetBelief, config: PlannerConfig, table: DetectabilityTable,
                  time_model: TimeModel, intrinsics: Intrinsics, mount: HeadMount):
+        for tilt in config.tilts_deg + config.fallback_tilts_deg:
+            if problem := time_model.pantilt.check(0.0, tilt):
+                raise ValueError(f"planner: a setting's {problem}, which the head cannot reach")
         self.belief = belief
         self.config = config
         self.table = table
         self.time_model = time_model
         self.intrinsics = intrinsics
         self.mount = mount
-        self.settings = CameraSettings.from_fov(intrinsics, config.tilts_deg, config.view_overlap)
         self.bins = SphereBins()
         self.vertices = grid_vertices(belief.grid.size_m, config.grid_spacing_m)
         self.positions = self.vertices  # the candidates of the coming decision (see plan_positions)
-        self._geometry = GeometryCache(belief, self.settings, mount, intrinsics, table, self.bins,
-                                       max(256, config.max_vertices + config.viewpoints))
-        self._here = ActionGeometry(belief, np.zeros((1, 2)), self.settings, mount, intrinsics, table, self.bins)
         self._blocks_m = block_centers(belief)
         self._aimed: AimedViewpoints | None = None
+        self.widened = False  # the fallback tilts are in use (widen)
+        self._use_tilts(config.tilts_deg)
+
+    def _use_tilts(self, tilts_deg: tuple[float, ...]) -> None:
+        """The camera settings at these tilts, and fresh action geometries for them."""
+        self.settings = CameraSettings.from_fov(self.intrinsics, tilts_deg, self.config.view_overlap)
+        self._geometry = GeometryCache(self.belief, self.settings, self.mount, self.intrinsics, self.table, self.bins,
+                                       max(256, self.config.max_vertices + self.config.viewpoints))
+        self._here = ActionGeometry(self.belief, np.zeros((1, 2)), self.settings, self.mount, self.intrinsics,
+                                    self.table, self.bins)
+
+    def widen(self) -> bool:
+        """Add the settings at ``fallback_tilts_deg``, once; whether it did. For a search about to stop
+        "exhausted": what the belief still holds inside the room then lies where no setting of the
+        usual tilts sees, such as a picture close below the head. Not from the start: a third tilt
+        searched worse on ``dev`` (docs/search-experiments.md). The settings already there keep their
+        indices, so the settings taken here stay taken."""
+        if self.widened or not self.config.fallback_tilts_deg:
+            return False
+        self.widened = True
+        self._use_tilts(self.config.tilts_deg + self.config.fallback_tilts_deg)
+        return True
 
     @property
     def action_count(self) -> int:

@@ -201,6 +201,8 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
     search._clock_start_s = float(part["clock_start_s"])
     search._pending_processing_s = float(part["pending_processing_s"])
     search.planner.set_processing_s(float(part["planner_processing_s"]))
+    if search.state.widened:
+        search.planner.widen()
     search.measure_driving()
     # The map-driven priors (support surfaces) remember the factor they applied: called once on the
     # restored map without applying the result, they remember it again (exactly, unless the last

@@ -127,6 +127,7 @@ class SearchState:
     driving_s: float = 0.0  # moves between positions: robot clock, and processing unless planned_processing_s is set
     look_log: list[dict] = field(default_factory=list)  # per look: expected and realised P, times
     glances: int = 0  # frames the navigator took toward the motion, searched on the way (not looks)
+    widened: bool = False  # the planner added its fallback tilts (SearchPlanner.widen)
 
     def took(self, setting: int, located: bool) -> None:
         """Book a look at ``setting`` from where the robot stands: it is not taken again from here,
@@ -241,6 +242,11 @@ class Search:
             if decision.kind == "move":
                 log.info("boxed in by the navigator's margin: squeezing through on its bare radius")
                 self._squeeze_to = decision.position_m
+        if decision.kind == "stop" and decision.status == "exhausted" and self._plans_positions and self.planner.widen():
+            self.state.widened = True
+            log.info("nothing is left worth a look at the usual tilts, with P = %.3f inside the room: adding tilts %s",
+                     self.belief.prob_inside, list(self.config.planner.fallback_tilts_deg))
+            return self._choose(pose)
         return decision
 
     def _choose_on(self, pose: Pose2D, squeeze: bool, policy: Policy | None = None) -> Decision:

@@ -148,6 +148,29 @@ def test_a_search_boxed_in_by_its_map_says_so_where_positions_near_it_are_reacha
     assert found and float(found.group(1)) > 0.1, d.reason
 
 
+def test_a_search_with_nothing_left_at_its_tilts_widens_to_the_fallback_tilts_once():
+    # all the mass on the floor 1 m ahead, 48° below the head: no level or raised view has it, and the
+    # robot is boxed in, so only a look down from here can find it
+    low = HintBox((3.9, 1.9, 0.0), (4.1, 2.1, 0.2), 1.0)
+    pose = Pose2D(3.0, 2.0, 0.0)
+    planner = _planner(3, boxes=(low,), table=DetectabilityTable.nominal())
+    boxed_in = np.full(len(planner.positions), np.inf)
+    usual = planner.settings
+    assert planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), boxed_in).status == "exhausted"
+    assert planner.widen() and not planner.widen()
+    n = len(usual)
+    assert len(planner.settings) == n + 8  # 9 level, 8 raised, now 8 lowered
+    np.testing.assert_array_equal(planner.settings.azimuth_rad[:n], usual.azimuth_rad)  # taken stays taken
+    np.testing.assert_array_equal(planner.settings.tilt_rad[:n], usual.tilt_rad)
+    d = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), boxed_in)
+    assert d.kind == "look" and d.setting >= n and d.tilt_rad == pytest.approx(math.radians(-30.0)), d.reason
+    assert d.find_prob > 0.5
+    without = _planner(3, boxes=(low,), table=DetectabilityTable.nominal(), fallback_tilts_deg=())
+    assert not without.widen() and len(without.settings) == n
+    with pytest.raises(ValueError, match=r"tilt_deg=-60 is outside the tilt limit \[-47, 31\]°"):
+        _planner(3, fallback_tilts_deg=(-60.0,))
+
+
 def test_unreachable_positions_are_never_chosen():
     planner = _planner(2)
     paths = _paths(planner, START)
