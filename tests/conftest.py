@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import time
 from collections.abc import Iterator
@@ -18,6 +19,7 @@ from offboard.perception.occupancy import FloorMap
 from offboard.perception.voxel_grid import VoxelGrid
 from offboard.planning import priors
 from offboard.robot.robot_client import RobotClient
+from offboard.search import checkpoint
 from offboard.search.loop import Search, SearchConfig
 from offboard.search.run import detectability_table
 from onboard.sim.textures import load_picture
@@ -103,6 +105,15 @@ def search_on(robot: RobotClient, dynamic: list | None = None, config: SearchCon
     detector = make_detector("sift", model, robot.info().intrinsics.to_intrinsics())
     return Search(robot, config, {"sift": (detector, detectability_table("sift", detector, {}))},
                   priors.uniform(VoxelGrid(config.room_m, config.resolution_m)), dynamic or [])
+
+
+def saved_and_read(folder: Path, search: Search) -> checkpoint.Checkpoint:
+    """``search``'s checkpoint, written to ``folder`` and read back (no request or transport: a search
+    built afresh in the test takes it)."""
+    header, arrays = checkpoint.capture(search)
+    header.update(request={}, transport={}, config=dataclasses.asdict(search.config), wall_time_s=0.0)
+    checkpoint.write_file(folder / checkpoint.FILE_NAME, header, arrays)
+    return checkpoint.read(folder)
 
 
 @pytest.fixture

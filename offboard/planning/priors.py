@@ -10,7 +10,9 @@
 - Type 5, predictive: :func:`last_seen` — a last-known location whose spread grows with time.
 
 Static priors (1, 3, 5) are grid-shaped weights mixed by :func:`combine` and set once; dynamic ones
-(2, 4) return factors that :meth:`TargetBelief.reweight` folds in as evidence arrives.
+(2, 4) return factors that :meth:`TargetBelief.reweight` folds in as evidence arrives. Each dynamic
+prior remembers the factor it has applied to each cube (:meth:`memory`), so the same evidence seen
+again is not counted again, and a checkpoint can carry that memory (:meth:`restore`).
 """
 
 from __future__ import annotations
@@ -145,15 +147,24 @@ class SupportSurfaces:
         self._applied = wanted
         return factor
 
+    def memory(self) -> np.ndarray:
+        """The factor applied so far to each cube (grid-shaped)."""
+        return self._applied
+
+    def restore(self, memory: np.ndarray) -> None:
+        self._applied = _checked_memory(memory, self.grid)
+
 
 class Saliency:
     """Type 4: where in an image something looks like the target, carried into the cubes it saw."""
 
-    def __init__(self, target_pictures: tuple[np.ndarray, ...], gain: float = 2.0, bins: int = 16):
+    def __init__(self, target_pictures: tuple[np.ndarray, ...], grid: VoxelGrid, gain: float = 2.0, bins: int = 16):
         hsv = [cv2.cvtColor(p, cv2.COLOR_RGB2HSV) for p in target_pictures]
         hist = cv2.calcHist(hsv, [0, 1], None, [bins, bins], [0, 180, 0, 256])
         self._hist = cv2.normalize(hist, None, 0, 255, cv2.NORM_MINMAX)
+        self.grid = grid
         self.gain = gain
+        self._applied = np.ones(grid.shape, np.float32)  # the strongest factor each cube has had
 
     def score(self, image_rgb: np.ndarray) -> np.ndarray:
         """Per-pixel score in [0, 1]: spectral-residual saliency × target-colour back-projection."""
@@ -176,14 +187,36 @@ class Saliency:
         back = cv2.calcBackProject([hsv], [0, 1], self._hist, [0, 180, 0, 256], 1).astype(np.float64)
         return cv2.GaussianBlur(back, (0, 0), 5) / 255.0
 
-    def factor(self, image_rgb: np.ndarray, grid: VoxelGrid, cube_index: np.ndarray,
-               camera_in_world: RigidTransform, intrinsics: Intrinsics) -> np.ndarray:
-        """Grid-shaped factor: 1 + gain × score at each seen cube's pixel, 1 elsewhere."""
+    def factor(self, image_rgb: np.ndarray, cube_index: np.ndarray, camera_in_world: RigidTransform,
+               intrinsics: Intrinsics) -> np.ndarray:
+        """Grid-shaped factor that brings each seen cube to 1 + gain × score at its pixel, if that is
+        more than it has had; 1 elsewhere. The same sight seen again is the same evidence: multiplied
+        in with every look, it once grew without bound where a salient thing was seen from afar, too
+        far for the detector, and piled the belief there (a `test` search stopped "exhausted")."""
         score = self.score(image_rgb)
-        centers = grid.centers().reshape(-1, 3)[cube_index]
+        centers = self.grid.centers().reshape(-1, 3)[cube_index]
         uv = intrinsics.project(camera_in_world.inverse().apply(centers))
         u = np.clip(np.nan_to_num(uv[:, 0]).round().astype(int), 0, intrinsics.width_px - 1)
         v = np.clip(np.nan_to_num(uv[:, 1]).round().astype(int), 0, intrinsics.height_px - 1)
-        factor = np.ones(grid.num_cubes, np.float32)
-        factor[cube_index] = 1.0 + self.gain * score[v, u]
-        return factor.reshape(grid.shape)
+        applied = self._applied.reshape(-1)
+        wanted = np.maximum(applied[cube_index], 1.0 + self.gain * score[v, u]).astype(np.float32)
+        factor = np.ones(self.grid.num_cubes, np.float32)
+        factor[cube_index] = wanted / applied[cube_index]
+        applied[cube_index] = wanted
+        return factor.reshape(self.grid.shape)
+
+    def memory(self) -> np.ndarray:
+        """The factor applied so far to each cube (grid-shaped)."""
+        return self._applied
+
+    def restore(self, memory: np.ndarray) -> None:
+        self._applied = _checked_memory(memory, self.grid)
+
+
+def _checked_memory(memory: np.ndarray, grid: VoxelGrid) -> np.ndarray:
+    """A dynamic prior's memory as given back (a copy), refused unless it fits ``grid``."""
+    memory = np.array(memory, np.float32)
+    if memory.shape != grid.shape or not np.all(np.isfinite(memory)) or np.any(memory <= 0):
+        raise ValueError(f"a dynamic prior's memory must be positive, finite and of shape {grid.shape}, "
+                         f"not {memory.shape}")
+    return memory

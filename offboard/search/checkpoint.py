@@ -9,7 +9,8 @@ crash leaves the previous checkpoint or the new one, never part of one. It holds
 - the pose tracker (estimate, covariance and the odometry-to-world offset),
 - the search's history (:class:`SearchState`: looks, taken settings, unreachable goals, positions,
   trail, planning times, motion and processing totals, estimate), the robot clock at the start, the
-  planning time not yet booked and the planner's measured processing time per look,
+  planning time not yet booked, the planner's measured processing time per look, and what each
+  dynamic prior has applied so far,
 - the wall time so far, the search configuration, the request and the transport, so that
   ``syt-offboard search --resume DIR`` needs no other flag.
 
@@ -36,7 +37,7 @@ import numpy as np
 
 from offboard.search import repeat_codec
 from offboard.search.loop import Search, SearchConfig, SearchState
-from offboard.search.run import SearchRequest
+from offboard.search.run import LookPrior, SearchRequest
 from offboard.search.top_view import LookTrace
 from shared.strict import StructureError, build
 from shared.transport import TransportConfig
@@ -45,7 +46,7 @@ log = logging.getLogger(__name__)
 
 FILE_NAME = "checkpoint.syt"
 MAGIC = b"SYTCKPT\x00"
-VERSION = 2  # 2: the belief's blocked facings
+VERSION = 3  # 2: the belief's blocked facings; 3: the dynamic priors' memory
 ALIGN = 64
 HEADER_KEYS = ("request", "transport", "config", "wall_time_s", "search", "belief", "coded", "grid_shape", "arrays")
 
@@ -142,8 +143,17 @@ def capture(search: Search) -> tuple[dict, dict[str, np.ndarray]]:
         "pending_processing_s": float(search._pending_processing_s),
         "planner_processing_s": float(search.planner.time_model.processing_s),
         "tracker": search.tracker.state(),
+        "priors": {},
     }
+    for name, prior in _look_priors(search):  # what each dynamic prior has applied so far
+        memory = repeat_codec.encode(prior.source.memory())
+        header["search"]["priors"][name] = [list(memory.shape), memory.dtype]
+        arrays.update(_coded(name, memory))
     return header, arrays
+
+
+def _look_priors(search: Search) -> list[tuple[str, LookPrior]]:
+    return [(f"prior.{i}", prior) for i, prior in enumerate(search.dynamic_priors) if isinstance(prior, LookPrior)]
 
 
 def encode_maps(belief: dict, log_odds: np.ndarray, observed: np.ndarray) -> tuple[dict, dict[str, np.ndarray]]:
@@ -204,13 +214,22 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
     if search.state.widened:
         search.planner.widen()
     search.measure_driving()
-    # The map-driven priors (support surfaces) remember the factor they applied: called once on the
-    # restored map without applying the result, they remember it again (exactly, unless the last
-    # action was a failed move, whose surveys changed the map after the last look). Saliency has
-    # no memory.
-    for prior in search.dynamic_priors:
-        prior(None, search)
+    _restore_priors(search, checkpoint)
     log.info("resumed after action %d (P[F] = %.3f)", search.state.actions, search.belief.success_prob)
+
+
+def _restore_priors(search: Search, checkpoint: Checkpoint) -> None:
+    saved, a = checkpoint.header["search"].get("priors", {}), checkpoint.arrays
+    for name, prior in _look_priors(search):
+        if name not in saved:
+            raise CheckpointError(f"{checkpoint.path}: search.priors.{name}", None,
+                                  "the checkpoint has no memory for this search's dynamic prior")
+        shape, dtype = saved[name]
+        try:
+            prior.source.restore(repeat_codec.decode(repeat_codec.Encoded(
+                tuple(shape), dtype, a[f"{name}.flags"], a[f"{name}.values"], a.get(f"{name}.palette"))))
+        except (ValueError, KeyError) as exc:
+            raise CheckpointError(f"{checkpoint.path}: {name}", None, f"damaged prior memory: {exc}") from None
 
 
 _STATE_FIELDS = {

@@ -98,16 +98,29 @@ def build_detectors(detector: str, request: SearchRequest, model: TargetModel, i
     return detectors
 
 
-def dynamic_priors(specs: tuple[str, ...], grid: VoxelGrid, model: TargetModel) -> list:
+@dataclass(frozen=True)
+class LookPrior:
+    """A dynamic prior as the search calls it after every look: ``factor(obs, search)`` is the
+    factor to reweight the belief by (None: none), ``source`` the prior, whose memory the checkpoint
+    keeps."""
+
+    source: priors.SupportSurfaces | priors.Saliency
+    factor: Callable
+
+    def __call__(self, obs, search):
+        return self.factor(obs, search)
+
+
+def dynamic_priors(specs: tuple[str, ...], grid: VoxelGrid, model: TargetModel) -> list[LookPrior]:
     """Type 2 (surfaces) and type 4 (saliency): factors applied to the belief after every look."""
     made = []
     if "surfaces" in specs:
         support = priors.SupportSurfaces(grid)
-        made.append(lambda obs, search: support.update(search.occupancy))
+        made.append(LookPrior(support, lambda obs, search: support.update(search.occupancy)))
     if "saliency" in specs:
-        saliency = priors.Saliency(model.pictures)
-        made.append(lambda obs, search: None if search.last_footprint is None else saliency.factor(
-            obs.capture.left, grid, search.last_footprint.cube_index, obs.camera_in_world, obs.intrinsics))
+        saliency = priors.Saliency(model.pictures, grid)
+        made.append(LookPrior(saliency, lambda obs, search: None if search.last_footprint is None else saliency.factor(
+            obs.capture.left, search.last_footprint.cube_index, obs.camera_in_world, obs.intrinsics)))
     return made
 
 

@@ -33,11 +33,24 @@ def _wall(with_picture: bool) -> np.ndarray:
 
 
 def test_saliency_raises_the_cubes_seen_where_the_image_looks_like_the_target():
-    factor = Saliency((_picture(),)).factor(_wall(True), FRONT, ALL, CAMERA, K)
+    factor = Saliency((_picture(),), FRONT).factor(_wall(True), ALL, CAMERA, K)
     centre = factor[4:6, 4:6].min()  # the cubes on the optical axis
     corners = np.concatenate([factor[:2, :2].ravel(), factor[-2:, -2:].ravel()])
     assert centre > 1.5 and corners.max() < 1.05 and factor.min() >= 1.0
-    assert np.all(Saliency((_picture(),)).factor(_wall(False), FRONT, ALL, CAMERA, K) == pytest.approx(1.0, abs=1e-3))
+    assert np.all(Saliency((_picture(),), FRONT).factor(_wall(False), ALL, CAMERA, K) == pytest.approx(1.0, abs=1e-3))
+
+
+def test_saliency_counts_the_same_sight_once_and_a_restored_one_remembers_it():
+    saliency = Saliency((_picture(),), FRONT)
+    first = saliency.factor(_wall(True), ALL, CAMERA, K)
+    assert np.all(saliency.factor(_wall(True), ALL, CAMERA, K) == 1.0)  # seen again: nothing new
+    assert np.all(saliency.factor(_wall(False), ALL, CAMERA, K) == 1.0)  # a duller view takes nothing back
+    np.testing.assert_array_equal(saliency.memory(), first)
+    restored = Saliency((_picture(),), FRONT)
+    restored.restore(saliency.memory())
+    assert np.all(restored.factor(_wall(True), ALL, CAMERA, K) == 1.0)
+    with pytest.raises(ValueError, match=r"of shape \(10, 10, 5\), not \(10, 10\)"):
+        restored.restore(np.ones((10, 10)))
 
 
 def test_the_space_above_a_mapped_table_is_raised_once():
@@ -53,3 +66,6 @@ def test_the_space_above_a_mapped_table_is_raised_once():
     assert np.all(factor[2:6, 2:6, 8:11] == boost)  # the 0.3 m above its top
     assert np.all(factor[2:6, 2:6, 11:] == 1.0) and np.all(factor[7:, 7:, :] == 1.0)
     assert np.all(support.update(occupancy) == 1.0)  # the same map again: nothing new
+    restored = SupportSurfaces(grid)
+    restored.restore(support.memory())
+    assert np.all(restored.update(occupancy) == 1.0)

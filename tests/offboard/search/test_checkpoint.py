@@ -14,14 +14,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import saved_and_read, search_on
 from offboard.bench.safety import Observer
 from offboard.navigation.localization import PoseTracker
+from offboard.perception.detection import TargetModel
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.voxel_grid import VoxelGrid
 from offboard.planning.belief import TargetBelief
+from offboard.planning.planner import Decision
 from offboard.search import checkpoint
 from offboard.search.checkpoint import CheckpointError
-from offboard.search.run import SearchRequest
+from offboard.search.loop import SearchConfig
+from offboard.search.run import SearchRequest, dynamic_priors
+from onboard.sim.textures import load_picture
 from shared.geometry import Pose2D
 from shared.launch import onboard_agent
 from shared.transport import TransportConfig
@@ -155,6 +160,24 @@ def test_the_command_line_says_what_is_missing(tmp_path):
         main(["search", "--connect", "tcp/127.0.0.1:1"])
     with pytest.raises(SystemExit, match="--resume: .*cannot read the checkpoint"):
         main(["search", "--resume", str(tmp_path)])
+
+
+@pytest.mark.integration
+def test_the_dynamic_priors_memory_comes_back(sim_agent, tmp_path):
+    model = TargetModel((load_picture("target", Path(".")),), (0.23, 0.23, 0.23))
+    grid = VoxelGrid(SearchConfig().room_m, SearchConfig().resolution_m)
+    search = search_on(sim_agent[1], dynamic_priors(("surfaces", "saliency"), grid, model))
+    search._look(Decision("look", "level", azimuth_rad=math.radians(90), tilt_rad=0.0, setting=0))
+    surfaces, saliency = (prior.source.memory() for prior in search.dynamic_priors)
+    assert surfaces.max() > 1.0 and saliency.max() > 1.0  # the look raised something for each
+    saved = saved_and_read(tmp_path, search)
+    resumed = search_on(sim_agent[1], dynamic_priors(("surfaces", "saliency"), grid, model))
+    checkpoint.restore(resumed, saved)
+    for before, prior in zip((surfaces, saliency), resumed.dynamic_priors):
+        np.testing.assert_array_equal(prior.source.memory(), before)
+    with_one_more = search_on(sim_agent[1], dynamic_priors(("surfaces", "saliency"), grid, model) * 2)
+    with pytest.raises(CheckpointError, match="no memory for this search's dynamic prior"):
+        checkpoint.restore(with_one_more, saved)
 
 
 # --- a killed planner, resumed ---------------------------------------------------------------------

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from conftest import search_on
+from conftest import saved_and_read, search_on
 from offboard.planning.planner import PlannerConfig
 from offboard.search import checkpoint
 from offboard.search.loop import SearchConfig
@@ -20,34 +20,39 @@ pytestmark = pytest.mark.integration
 RAISED_ONLY = SearchConfig(planned_processing_s=0.45, planner=PlannerConfig(tilts_deg=(30.0,)))
 
 
-def _on_the_floor(search) -> None:
+def on_the_floor(search) -> None:
+    """All the belief inside the room on the floor's lowest 0.3 m."""
     grid = search.belief.grid
     weights = np.zeros(grid.shape)
     weights[:, :, : int(0.3 / grid.resolution_m)] = 1.0
     search.belief.set_prior(weights, prob_outside=0.05)
 
 
-def test_a_search_out_of_usual_views_looks_down_and_a_resumed_one_remembers(sim_agent, tmp_path):
+def test_a_search_out_of_usual_views_looks_down(sim_agent):
     search = search_on(sim_agent[1], config=RAISED_ONLY)
-    _on_the_floor(search)
+    on_the_floor(search)
     usual = len(search.planner.settings)
     decision = search._choose(search._pose())
     assert decision.kind != "stop", decision.reason
     assert search.state.widened and len(search.planner.settings) > usual
     assert np.degrees(search.planner.settings.tilt_rad[decision.setting]) == pytest.approx(-30.0)
 
-    header, arrays = checkpoint.capture(search)
-    header.update(request={}, transport={}, config=dataclasses.asdict(search.config), wall_time_s=0.0)
-    checkpoint.write_file(tmp_path / checkpoint.FILE_NAME, header, arrays)
-    resumed = search_on(sim_agent[1], config=RAISED_ONLY)
-    assert len(resumed.planner.settings) == usual
-    checkpoint.restore(resumed, checkpoint.read(tmp_path))
-    assert resumed.planner.widened and len(resumed.planner.settings) == len(search.planner.settings)
-
 
 def test_without_fallback_tilts_it_stops_there(sim_agent):
     config = dataclasses.replace(RAISED_ONLY, planner=dataclasses.replace(RAISED_ONLY.planner, fallback_tilts_deg=()))
     search = search_on(sim_agent[1], config=config)
-    _on_the_floor(search)
+    on_the_floor(search)
     decision = search._choose(search._pose())
     assert decision.kind == "stop" and decision.status == "exhausted" and not search.state.widened
+
+
+def test_a_resumed_search_keeps_the_fallback_tilts(sim_agent, tmp_path):
+    search = search_on(sim_agent[1], config=RAISED_ONLY)
+    on_the_floor(search)
+    search._choose(search._pose())
+    assert search.planner.widened
+    saved = saved_and_read(tmp_path, search)
+    resumed = search_on(sim_agent[1], config=RAISED_ONLY)
+    assert not resumed.planner.widened
+    checkpoint.restore(resumed, saved)
+    assert resumed.planner.widened and len(resumed.planner.settings) == len(search.planner.settings)
