@@ -177,13 +177,18 @@ def _coded(name: str, encoded: repeat_codec.Encoded) -> dict[str, np.ndarray]:
     return arrays
 
 
+def _decoded(checkpoint: Checkpoint, name: str, shape: list[int], dtype: str) -> np.ndarray:
+    """The array that :func:`_coded` stored under ``name``."""
+    a = checkpoint.arrays
+    return repeat_codec.decode(repeat_codec.Encoded(tuple(shape), dtype, a[f"{name}.flags"], a[f"{name}.values"],
+                                                    a.get(f"{name}.palette")))
+
+
 def decode_maps(checkpoint: Checkpoint) -> tuple[dict, np.ndarray, np.ndarray]:
     """The belief state, log-odds and observed mask that :func:`encode_maps` was given."""
     h, a = checkpoint.header, checkpoint.arrays
     try:
-        mass, odds = (repeat_codec.decode(repeat_codec.Encoded(tuple(shape), dtype, a[f"{name}.flags"], a[f"{name}.values"],
-                                                               a.get(f"{name}.palette")))
-                      for name, (shape, dtype) in h["coded"].items())
+        mass, odds = (_decoded(checkpoint, name, shape, dtype) for name, (shape, dtype) in h["coded"].items())
     except ValueError as exc:
         raise CheckpointError(str(checkpoint.path), None, f"damaged map: {exc}") from None
     shape = tuple(h["grid_shape"])
@@ -219,15 +224,13 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
 
 
 def _restore_priors(search: Search, checkpoint: Checkpoint) -> None:
-    saved, a = checkpoint.header["search"].get("priors", {}), checkpoint.arrays
+    saved = checkpoint.header["search"].get("priors", {})
     for name, prior in _look_priors(search):
         if name not in saved:
             raise CheckpointError(f"{checkpoint.path}: search.priors.{name}", None,
                                   "the checkpoint has no memory for this search's dynamic prior")
-        shape, dtype = saved[name]
         try:
-            prior.source.restore(repeat_codec.decode(repeat_codec.Encoded(
-                tuple(shape), dtype, a[f"{name}.flags"], a[f"{name}.values"], a.get(f"{name}.palette"))))
+            prior.source.restore(_decoded(checkpoint, name, *saved[name]))
         except (ValueError, KeyError) as exc:
             raise CheckpointError(f"{checkpoint.path}: {name}", None, f"damaged prior memory: {exc}") from None
 
