@@ -112,13 +112,43 @@ class SupportConfig:
     boost: float = 5.0  # how much more likely the target is above a surface than elsewhere
 
 
-class SupportSurfaces:
+class _FactorMemory:
+    """What a dynamic prior has applied to each cube so far: it applies only what is new, so the same
+    evidence seen again is not counted again, and a checkpoint carries it (:meth:`memory`,
+    :meth:`restore`)."""
+
+    def __init__(self, grid: VoxelGrid):
+        self.grid = grid
+        self._applied = np.ones(grid.shape, np.float32)
+
+    def _bring_to(self, wanted: np.ndarray, cubes: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """The grid-shaped factor that brings ``cubes`` (flat indices; all by default) from what they
+        have had to ``wanted``; 1 elsewhere."""
+        applied = self._applied.reshape(-1)
+        factor = np.ones(self.grid.num_cubes, np.float32)
+        factor[cubes] = wanted / applied[cubes]
+        applied[cubes] = wanted
+        return factor.reshape(self.grid.shape)
+
+    def memory(self) -> np.ndarray:
+        """The factor applied so far to each cube (grid-shaped)."""
+        return self._applied
+
+    def restore(self, memory: np.ndarray) -> None:
+        """Take back a :meth:`memory` (a copy), refused unless it fits the grid."""
+        memory = np.array(memory, np.float32)
+        if memory.shape != self.grid.shape or not np.all(np.isfinite(memory)) or np.any(memory <= 0):
+            raise ValueError(f"a dynamic prior's memory must be positive, finite and of shape {self.grid.shape}, "
+                             f"not {memory.shape}")
+        self._applied = memory
+
+
+class SupportSurfaces(_FactorMemory):
     """Type 2: raise the probability just above horizontal support surfaces of the occupancy map."""
 
     def __init__(self, grid: VoxelGrid, config: SupportConfig = SupportConfig()):
-        self.grid = grid
+        super().__init__(grid)
         self.config = config
-        self._applied = np.ones(grid.shape, np.float32)
 
     def surfaces(self, occupancy: OccupancyGrid) -> np.ndarray:
         """Occupied cubes, within the height band, with a free cube right above (grid-shaped bool)."""
@@ -142,29 +172,18 @@ class SupportSurfaces:
         layers = max(1, int(round(self.config.layer_m / self.grid.resolution_m)))
         for k in range(1, layers + 1):
             above[:, :, k:] |= top[:, :, :-k]
-        wanted = np.where(above, self.config.boost, 1.0).astype(np.float32)
-        factor = wanted / self._applied
-        self._applied = wanted
-        return factor
-
-    def memory(self) -> np.ndarray:
-        """The factor applied so far to each cube (grid-shaped)."""
-        return self._applied
-
-    def restore(self, memory: np.ndarray) -> None:
-        self._applied = _checked_memory(memory, self.grid)
+        return self._bring_to(np.where(above, self.config.boost, 1.0).astype(np.float32).reshape(-1))
 
 
-class Saliency:
+class Saliency(_FactorMemory):
     """Type 4: where in an image something looks like the target, carried into the cubes it saw."""
 
     def __init__(self, target_pictures: tuple[np.ndarray, ...], grid: VoxelGrid, gain: float = 2.0, bins: int = 16):
         hsv = [cv2.cvtColor(p, cv2.COLOR_RGB2HSV) for p in target_pictures]
         hist = cv2.calcHist(hsv, [0, 1], None, [bins, bins], [0, 180, 0, 256])
         self._hist = cv2.normalize(hist, None, 0, 255, cv2.NORM_MINMAX)
-        self.grid = grid
+        super().__init__(grid)  # the strongest factor each cube has had
         self.gain = gain
-        self._applied = np.ones(grid.shape, np.float32)  # the strongest factor each cube has had
 
     def score(self, image_rgb: np.ndarray) -> np.ndarray:
         """Per-pixel score in [0, 1]: spectral-residual saliency × target-colour back-projection."""
@@ -198,25 +217,5 @@ class Saliency:
         uv = intrinsics.project(camera_in_world.inverse().apply(centers))
         u = np.clip(np.nan_to_num(uv[:, 0]).round().astype(int), 0, intrinsics.width_px - 1)
         v = np.clip(np.nan_to_num(uv[:, 1]).round().astype(int), 0, intrinsics.height_px - 1)
-        applied = self._applied.reshape(-1)
-        wanted = np.maximum(applied[cube_index], 1.0 + self.gain * score[v, u]).astype(np.float32)
-        factor = np.ones(self.grid.num_cubes, np.float32)
-        factor[cube_index] = wanted / applied[cube_index]
-        applied[cube_index] = wanted
-        return factor.reshape(self.grid.shape)
-
-    def memory(self) -> np.ndarray:
-        """The factor applied so far to each cube (grid-shaped)."""
-        return self._applied
-
-    def restore(self, memory: np.ndarray) -> None:
-        self._applied = _checked_memory(memory, self.grid)
-
-
-def _checked_memory(memory: np.ndarray, grid: VoxelGrid) -> np.ndarray:
-    """A dynamic prior's memory as given back (a copy), refused unless it fits ``grid``."""
-    memory = np.array(memory, np.float32)
-    if memory.shape != grid.shape or not np.all(np.isfinite(memory)) or np.any(memory <= 0):
-        raise ValueError(f"a dynamic prior's memory must be positive, finite and of shape {grid.shape}, "
-                         f"not {memory.shape}")
-    return memory
+        wanted = np.maximum(self._applied.reshape(-1)[cube_index], 1.0 + self.gain * score[v, u])
+        return self._bring_to(wanted.astype(np.float32), cube_index)
