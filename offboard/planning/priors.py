@@ -156,7 +156,9 @@ class SupportSurfaces(_FactorMemory):
         state_free = occupancy.observed & ~occ
         top = np.zeros_like(occ)
         top[:, :, :-1] = occ[:, :, :-1] & state_free[:, :, 1:]
-        z = self.grid.centers()[0, 0, :, 2]
+        layers = np.zeros((self.grid.shape[2], 3), int)
+        layers[:, 2] = np.arange(self.grid.shape[2])
+        z = self.grid.center_of(layers)[:, 2]  # each layer's height, not the whole grid's centres
         top[:, :, (z < self.config.min_height_m) | (z > self.config.max_height_m)] = False
         area_cells = self.config.min_area_m2 / self.grid.resolution_m**2
         column = top.any(axis=2).astype(np.uint8)
@@ -213,7 +215,7 @@ class Saliency(_FactorMemory):
         in with every look, it once grew without bound where a salient thing was seen from afar, too
         far for the detector, and piled the belief there (a `test` search stopped "exhausted")."""
         score = self.score(image_rgb)
-        centers = self.grid.centers().reshape(-1, 3)[cube_index]
+        centers = self.grid.center_of(np.stack(np.unravel_index(cube_index, self.grid.shape), axis=-1))
         uv = intrinsics.project(camera_in_world.inverse().apply(centers))
         u = np.clip(np.nan_to_num(uv[:, 0]).round().astype(int), 0, intrinsics.width_px - 1)
         v = np.clip(np.nan_to_num(uv[:, 1]).round().astype(int), 0, intrinsics.height_px - 1)
