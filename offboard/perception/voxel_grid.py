@@ -44,10 +44,14 @@ class VoxelGrid:
     def contains(self, index: np.ndarray) -> np.ndarray:
         return np.all((index >= 0) & (index < np.array(self.shape)), axis=-1)
 
+    def axis_centers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The cubes' centre coordinates along x, y and z (world frame): :meth:`centers` without
+        the (nx, ny, nz, 3) array."""
+        return tuple(self.origin_m[a] + (np.arange(n) + 0.5) * self.resolution_m for a, n in enumerate(self.shape))
+
     def centers(self) -> np.ndarray:
         """Centres of all cubes, shape (nx, ny, nz, 3), world frame."""
-        axes = [self.origin_m[a] + (np.arange(n) + 0.5) * self.resolution_m for a, n in enumerate(self.shape)]
-        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+        return np.stack(np.meshgrid(*self.axis_centers(), indexing="ij"), axis=-1)
 
     def center_of(self, index: np.ndarray) -> np.ndarray:
         return self.origin + (np.asarray(index) + 0.5) * self.resolution_m

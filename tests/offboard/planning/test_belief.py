@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from offboard.planning import belief as belief_module
 from offboard.planning.belief import TargetBelief
 from offboard.perception.detectability import DetectabilityTable, facing_angle_deg
 from offboard.planning.detection_function import look_footprint, visible_depth
@@ -112,6 +113,51 @@ def test_mass_near_counts_the_ball_around_a_point():
     assert whole == pytest.approx(1.0)
     small = belief.mass_near(np.array([1.0, 0.5, 0.25]), 0.1)
     assert 0 < small < 0.05
+
+
+def _whole_grid_renormalise(belief):
+    """The renormalisation as one float64 copy of the whole belief: what the chunked one must equal."""
+    mass = belief._mass.astype(np.float64) * belief._scale
+    outside = belief._outside * belief._scale
+    total = mass.sum() + outside
+    f, (cx, cy, cz) = belief.coarse_factor, belief.coarse_shape
+    padded = np.zeros((cx * f, cy * f, cz * f, belief.facing_sectors))
+    nx, ny, nz = belief.grid.shape
+    padded[:nx, :ny, :nz] = (mass / total).astype(np.float32)
+    return (mass / total).astype(np.float32), outside / total, \
+        padded.reshape(cx, f, cy, f, cz, f, belief.facing_sectors).sum(axis=(1, 3, 5))
+
+
+@pytest.mark.parametrize("chunk", [4096, 1 << 20])
+def test_renormalising_a_chunk_at_a_time_is_the_whole_grid_renormalisation_to_the_bit(monkeypatch, chunk):
+    monkeypatch.setattr(belief_module, "_CHUNK", chunk)  # small chunks: the pairwise split and many slabs
+    rng = np.random.default_rng(1)  # masses over many orders of magnitude: a sum split elsewhere rounds otherwise
+    belief = TargetBelief(VoxelGrid((2.05, 1.55, 1.15), 0.05), facing_sectors=8, coarse_factor=3)
+    belief.set_prior(rng.lognormal(0.0, 3.0, belief.grid.shape), prob_outside=0.05)
+    cubes = rng.choice(belief.grid.num_cubes, 5000, replace=False)
+    belief.observe(cubes, rng.uniform(0, 3, (5000, 8)))  # stored masses now scaled
+    flat = belief._mass.reshape(-1)
+    total = belief_module._scaled_total(flat, belief._scale, 0, flat.size)
+    assert total == (flat.astype(np.float64) * belief._scale).sum()  # a division would hide a last bit
+    mass, outside, coarse = _whole_grid_renormalise(belief)
+    belief._renormalise()
+    assert np.array_equal(belief._mass, mass) and belief._outside == outside and belief._scale == 1.0
+    assert np.array_equal(belief._coarse, coarse)
+
+
+def test_mass_near_and_walls_read_the_cube_centres_as_the_whole_grid_of_centres_does():
+    grid = VoxelGrid((2.05, 1.55, 1.15), 0.05)
+    belief = TargetBelief(grid, facing_sectors=8, prob_outside=0.0)
+    belief.set_prior(np.random.default_rng(4).random(grid.shape), prob_outside=0.0)
+    point = np.array([0.33, 1.21, 0.52])
+    centers = grid.centers()
+    inside = np.sum((centers - point) ** 2, axis=-1) <= 0.4**2
+    assert belief.mass_near(point, 0.4) == float(belief.target_prob[inside].sum())
+    belief.exclude_facings_into_walls(0.3)
+    for s, azimuth in enumerate(belief.facing_azimuths_rad):
+        face = centers[..., :2] + 0.3 * np.array([math.cos(azimuth), math.sin(azimuth)])
+        into_wall = np.any((face < 0.0) | (face > grid.size_m[:2]), axis=-1)
+        assert (belief.mass_by_facing()[into_wall, s] == 0).all() and (belief.mass_by_facing()[~into_wall, s] > 0).all()
 
 
 ROOM = VoxelGrid((4.0, 3.0, 2.5), 0.05)
