@@ -85,10 +85,6 @@ class TargetBelief:
         """Probability per cube and facing sector (a copy), shape ``grid.shape + (facing_sectors,)``."""
         return self._mass.astype(np.float64) * self._scale
 
-    def column_map(self) -> np.ndarray:
-        """Target probability summed over each vertical column (the report's target probability map)."""
-        return self.target_prob.sum(axis=2)
-
     # --- updating ------------------------------------------------------------------------------------
 
     def set_prior(self, weights: np.ndarray, prob_outside: float) -> None:

@@ -142,23 +142,24 @@ class Recorder:
     def log_maps(self, belief: TargetBelief, occupancy: OccupancyGrid) -> None:
         s = self.stream
         grid = occupancy.grid
-        centers = grid.centers()
         occupied = occupancy.occupied()
-        points = centers[occupied]
+        cubes = np.argwhere(occupied)  # the centres of the cubes shown only: all of them are 161 MB in a 20 m hall
         values = occupancy.log_odds[occupied]
-        if len(points) > MAX_OCCUPIED_POINTS:
+        if len(cubes) > MAX_OCCUPIED_POINTS:
             keep = np.argsort(values)[-MAX_OCCUPIED_POINTS:]
-            points, values = points[keep], values[keep]
-        s.log("world/occupancy", rr.Points3D(points, radii=grid.resolution_m / 2, colors=_ramp(values, occupancy.config.clamp_max)))
+            cubes, values = cubes[keep], values[keep]
+        s.log("world/occupancy", rr.Points3D(grid.center_of(cubes), radii=grid.resolution_m / 2,
+                                             colors=_ramp(values, occupancy.config.clamp_max)))
         prob = belief.target_prob
         flat = prob.reshape(-1)
-        top = np.argpartition(flat, -MAX_PROBABLE_CUBES)[-MAX_PROBABLE_CUBES:]
-        top = top[flat[top] > 2.0 * belief.prob_inside / flat.size]  # only cubes above average
-        s.log("world/target_prob", rr.Boxes3D(centers=centers.reshape(-1, 3)[top], half_sizes=[grid.resolution_m / 2] * 3,
+        top = np.flatnonzero(flat > 2.0 * belief.prob_inside / flat.size)  # only cubes above average
+        if len(top) > MAX_PROBABLE_CUBES:  # selected among those: a partition of the whole grid takes 0.4 s in a 20 m hall
+            top = top[np.argpartition(flat[top], -MAX_PROBABLE_CUBES)[-MAX_PROBABLE_CUBES:]]
+        top_centers = grid.center_of(np.stack(np.unravel_index(top, grid.shape), axis=-1))
+        s.log("world/target_prob", rr.Boxes3D(centers=top_centers, half_sizes=[grid.resolution_m / 2] * 3,
                                               colors=_ramp(flat[top], flat.max() if flat.size else 1.0, hot=True),
                                               fill_mode="solid"))
-        column = belief.column_map()
-        s.log("maps/target_prob", rr.Image(_to_image(column)))
+        s.log("maps/target_prob", rr.Image(_to_image(prob.sum(axis=2))))  # the report's map: each column's sum
 
     def log_plan(self, values: ActionValues, positions: np.ndarray) -> None:
         """Every action's expected detection probability, and the candidate positions (the report's

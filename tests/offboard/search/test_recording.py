@@ -1,0 +1,62 @@
+"""What the recording shows of the maps: read back from the .rrd file Rerun wrote."""
+
+from __future__ import annotations
+
+import numpy as np
+from rerun.chunk import RrdReader
+
+from offboard.perception.occupancy import OccupancyGrid
+from offboard.perception.voxel_grid import VoxelGrid
+from offboard.planning.belief import TargetBelief
+from offboard.search.recording import MAX_PROBABLE_CUBES, Recorder
+from shared.geometry import HeadMount, Intrinsics, Pose2D
+
+GRID = VoxelGrid((3.0, 2.0, 1.5), 0.05)
+K = Intrinsics.from_fov(640, 480, 66.0)
+
+
+def _logged(rrd, entity: str, column: str) -> np.ndarray:
+    for chunk in RrdReader(rrd).stream():
+        if chunk.entity_path == entity:
+            return np.array(chunk.to_record_batch().column(column).to_pylist()[0])
+    raise AssertionError(f"nothing logged at {entity}")
+
+
+def _maps_recorded(tmp_path, belief: TargetBelief, occupancy: OccupancyGrid):
+    rrd = tmp_path / "maps.rrd"
+    recorder = Recorder(path=rrd)
+    recorder.log_maps(belief, occupancy)
+    recorder.close()
+    return rrd
+
+
+def test_the_recording_shows_the_occupied_cubes_and_the_likeliest_ones_where_they_are(tmp_path):
+    occupancy = OccupancyGrid(GRID)
+    camera = HeadMount().camera_in_world(Pose2D(0.5, 1.0, 0.0), 0.0, 0.0)
+    occupancy.integrate_disparity(np.full((480, 640), K.fx_px * 0.12 / 1.5, np.float32), K, 0.12, camera)
+    weights = np.ones(GRID.shape)
+    weights[40:43, 10:14, 15:17] = 50.0  # 24 cubes well above the average
+    belief = TargetBelief(GRID, facing_sectors=4)
+    belief.set_prior(weights, prob_outside=0.05)
+    rrd = _maps_recorded(tmp_path, belief, occupancy)
+
+    centres = GRID.centers()
+    shown = _logged(rrd, "/world/occupancy", "Points3D:positions")
+    assert len(shown) > 1000 and np.allclose(shown, centres[occupancy.occupied()], atol=1e-6)
+    likeliest = _logged(rrd, "/world/target_prob", "Boxes3D:centers")
+    expected = centres[40:43, 10:14, 15:17].reshape(-1, 3)
+    assert len(likeliest) == 24 and np.allclose(np.sort(likeliest, axis=0), np.sort(expected, axis=0), atol=1e-6)
+
+
+def test_the_recording_shows_at_most_its_share_of_likely_cubes_and_the_likeliest_first(tmp_path):
+    rng = np.random.default_rng(0)
+    weights = np.ones(GRID.shape)
+    hot = rng.choice(GRID.num_cubes, 3 * MAX_PROBABLE_CUBES, replace=False)
+    weights.flat[hot] = 10.0 + rng.random(hot.size)  # more cubes above the average than are shown
+    belief = TargetBelief(GRID, facing_sectors=1)
+    belief.set_prior(weights, prob_outside=0.0)
+    rrd = _maps_recorded(tmp_path, belief, OccupancyGrid(GRID))
+    likeliest = _logged(rrd, "/world/target_prob", "Boxes3D:centers")
+    shown = np.unique(GRID.index_of(likeliest) @ np.array([GRID.shape[1] * GRID.shape[2], GRID.shape[2], 1]))
+    best = hot[np.argsort(weights.flat[hot])[-MAX_PROBABLE_CUBES:]]
+    assert len(likeliest) == MAX_PROBABLE_CUBES and set(shown) == set(best)
