@@ -49,6 +49,13 @@ class VoxelGrid:
         the (nx, ny, nz, 3) array."""
         return tuple(self.origin_m[a] + (np.arange(n) + 0.5) * self.resolution_m for a, n in enumerate(self.shape))
 
+    def squared_distances(self, point_m: np.ndarray, box: tuple[slice, slice, slice] | None = None) -> np.ndarray:
+        """Squared distance from ``point_m`` to the centre of every cube (of ``box``, a block of index
+        slices, if given), shape (nx, ny, nz) or the box's, without the array of centres."""
+        box = box if box is not None else (slice(None),) * 3
+        x, y, z = (axis[part] - p for axis, part, p in zip(self.axis_centers(), box, np.asarray(point_m, float)))
+        return (x[:, None, None] ** 2 + y[None, :, None] ** 2) + z[None, None, :] ** 2
+
     def centers(self) -> np.ndarray:
         """Centres of all cubes, shape (nx, ny, nz, 3), world frame."""
         return np.stack(np.meshgrid(*self.axis_centers(), indexing="ij"), axis=-1)

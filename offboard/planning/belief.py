@@ -241,8 +241,7 @@ class TargetBelief:
         hi = self.grid.index_of(np.asarray(position_m) + radius_m) + 1
         lo, hi = np.clip(lo, 0, self.grid.shape), np.clip(hi, 0, self.grid.shape)
         box = tuple(slice(a, b) for a, b in zip(lo, hi))
-        x, y, z = (axis[part] - p for axis, part, p in zip(self.grid.axis_centers(), box, np.asarray(position_m)))
-        inside = (x[:, None, None] ** 2 + y[None, :, None] ** 2) + z[None, None, :] ** 2 <= radius_m**2
+        inside = self.grid.squared_distances(position_m, box) <= radius_m**2
         return float(self._mass[box].sum(axis=-1, dtype=np.float64)[inside].sum()) * self._scale
 
     def _renormalise(self) -> None:

@@ -89,8 +89,7 @@ def last_seen(grid: VoxelGrid, position_m: np.ndarray, elapsed_s: float, sigma0_
               spread_m_per_s: float = 0.01) -> np.ndarray:
     """Type 5: a Gaussian around where the target was last known, wider the longer ago."""
     sigma = sigma0_m + spread_m_per_s * max(elapsed_s, 0.0)
-    d2 = np.sum((grid.centers() - np.asarray(position_m)) ** 2, axis=-1)
-    return np.exp(-0.5 * d2 / sigma**2)
+    return np.exp(-0.5 * grid.squared_distances(position_m) / sigma**2)
 
 
 def combine(grid: VoxelGrid, weighted: list[tuple[float, np.ndarray]]) -> np.ndarray:
