@@ -155,9 +155,7 @@ class SupportSurfaces(_FactorMemory):
         state_free = occupancy.observed & ~occ
         top = np.zeros_like(occ)
         top[:, :, :-1] = occ[:, :, :-1] & state_free[:, :, 1:]
-        layers = np.zeros((self.grid.shape[2], 3), int)
-        layers[:, 2] = np.arange(self.grid.shape[2])
-        z = self.grid.center_of(layers)[:, 2]  # each layer's height, not the whole grid's centres
+        z = self.grid.axis_centers()[2]  # each layer's height
         top[:, :, (z < self.config.min_height_m) | (z > self.config.max_height_m)] = False
         area_cells = self.config.min_area_m2 / self.grid.resolution_m**2
         column = top.any(axis=2).astype(np.uint8)
