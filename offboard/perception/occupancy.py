@@ -169,10 +169,9 @@ class OccupancyGrid:
                 holds = _grown(holds, axis, margin_cubes, margin_cubes, outside=True)
         return empty & ~holds
 
-    def cast_rays(self, origins_m: np.ndarray, directions: np.ndarray, max_range_m: float,
-                  stop_at_unknown: bool = False) -> RayHits:
+    def cast_rays(self, origins_m: np.ndarray, directions: np.ndarray, max_range_m: float) -> RayHits:
         """Walk each ray to the first occupied cube (or the room's boundary, or ``max_range_m``);
-        with ``stop_at_unknown``, unknown space blocks the ray too (a pessimistic sensed sphere)."""
+        unknown space does not stop it, but is noted (:attr:`RayHits.crossed_unknown`)."""
         origins = np.ascontiguousarray((np.atleast_2d(origins_m) - self.grid.origin) / self.grid.resolution_m)
         dirs = np.atleast_2d(directions).astype(np.float64)
         dirs = np.ascontiguousarray(dirs / np.linalg.norm(dirs, axis=1, keepdims=True))
@@ -181,7 +180,7 @@ class OccupancyGrid:
         c = self.config
         dist, hit, unknown = _cast_rays(self._log_odds, self._observed, origins, dirs,
                                         max_range_m / self.grid.resolution_m, c.occupied_log_odds,
-                                        c.free_log_odds, stop_at_unknown)
+                                        c.free_log_odds)
         return RayHits(dist * self.grid.resolution_m, hit, unknown)
 
     def coarsened(self, factor: int) -> OccupancyGrid:
@@ -374,7 +373,7 @@ def _walk_free(x0, y0, z0, x1, y1, z1, shape, frame, hit_stamp, touch_stamp, tou
 
 
 @numba.njit(cache=True, parallel=True)
-def _cast_rays(log_odds, observed, origins, dirs, max_steps, occupied_lo, free_lo, stop_at_unknown):
+def _cast_rays(log_odds, observed, origins, dirs, max_steps, occupied_lo, free_lo):
     n = origins.shape[0]
     shape = log_odds.shape
     dist = np.empty(n)
@@ -382,12 +381,12 @@ def _cast_rays(log_odds, observed, origins, dirs, max_steps, occupied_lo, free_l
     unknown = np.zeros(n, np.bool_)
     for r in numba.prange(n):
         dist[r], hit[r], unknown[r] = _cast_one(log_odds, observed, origins[r], dirs[r], max_steps,
-                                                occupied_lo, free_lo, shape, stop_at_unknown)
+                                                occupied_lo, free_lo, shape)
     return dist, hit, unknown
 
 
 @numba.njit(cache=True)
-def _cast_one(log_odds, observed, start, direction, max_t, occupied_lo, free_lo, shape, stop_at_unknown):
+def _cast_one(log_odds, observed, start, direction, max_t, occupied_lo, free_lo, shape):
     i, si, ti, di = _axis_setup(start[0], direction[0])
     j, sj, tj, dj = _axis_setup(start[1], direction[1])
     k, sk, tk, dk = _axis_setup(start[2], direction[2])
@@ -400,8 +399,6 @@ def _cast_one(log_odds, observed, start, direction, max_t, occupied_lo, free_lo,
         if value >= occupied_lo:
             return t_entry, True, crossed_unknown
         if not observed[i, j, k] or value > free_lo:
-            if stop_at_unknown and t_entry > 0.0:
-                return t_entry, True, True
             crossed_unknown = True
         if ti <= tj and ti <= tk:
             t_entry = ti

@@ -73,7 +73,6 @@ class PlannerConfig:
     fallback_tilts_deg: tuple[float, ...] = (-30.0,)
     view_overlap: float = field(default=0.4, metadata=bounds(0.0, 0.9))  # between neighbouring settings
     same_position_m: float = field(default=0.5, metadata=bounds(0.0, 5.0))  # "here" for a candidate
-    unknown_is_opaque: bool = False  # expected sensed spheres: unknown space hides what is behind it
     behind_surface_m: float = field(default=0.12, metadata=bounds(0.0, 1.0))  # a target's centre lies behind its face:
     # what a look counts as seen reaches this far behind the surface, in expectation (sensed spheres) as in fact
     sphere_resolution_m: float = field(default=0.1, metadata=bounds(0.01, 1.0))  # map used for radii
@@ -254,8 +253,7 @@ class SearchPlanner:
         heavy = heavy_blocks(self.belief)
         rows = []
         for geometry, which in parts:
-            spheres = sensed_spheres(coarse, geometry.cameras_m(which), self.bins, far,
-                                     self.config.unknown_is_opaque, self._blocks_m[heavy])
+            spheres = sensed_spheres(coarse, geometry.cameras_m(which), self.bins, far, self._blocks_m[heavy])
             rows.append(evaluate(geometry, which, self.belief, spheres, self.config.behind_surface_m, heavy))
         return ActionValues(np.vstack([r.find_prob for r in rows]),
                             np.concatenate([r.covering_prob for r in rows]))

@@ -3,8 +3,9 @@
 Space around the camera is divided into solid angles (azimuth × elevation bins). Each has a radius:
 the distance to the first occupied cube along its central axis, capped at the detector's outer
 range; an inner radius is the detector's near limit. For positions the robot has not visited, the
-expected sensed sphere is built the same way from the map so far; unknown space is transparent
-unless ``unknown_is_opaque`` (the pessimistic choice).
+expected sensed sphere is built the same way from the map so far, unknown space transparent: a
+search begins with nearly all of the room unknown, so a sphere that stopped at unknown space would
+value no look at all.
 """
 
 from __future__ import annotations
@@ -45,27 +46,26 @@ class SensedSpheres:
 
 
 def sensed_spheres(occupancy: OccupancyGrid, centers_m: np.ndarray, bins: SphereBins, outer_m: float,
-                   unknown_is_opaque: bool = False, toward_m: np.ndarray | None = None) -> SensedSpheres:
+                   toward_m: np.ndarray | None = None) -> SensedSpheres:
     """Ray-cast every bin's axis from every centre on the occupancy map (pass a
     :meth:`~OccupancyGrid.coarsened` map: a radius to within a block is plenty for planning), and
     the exact direction to each point of ``toward_m`` (T, 3): a bin's axis can graze an obstacle
     that the rays to a small, heavily weighted place pass by."""
     centers = np.atleast_2d(np.asarray(centers_m, np.float64))
     axes = bins.axes().reshape(-1, 3)
-    radius = _cast(occupancy, np.repeat(centers, len(axes), axis=0), np.tile(axes, (len(centers), 1)), outer_m,
-                   unknown_is_opaque).reshape(len(centers), bins.el_count, bins.az_count)
+    radius = _cast(occupancy, np.repeat(centers, len(axes), axis=0), np.tile(axes, (len(centers), 1)),
+                   outer_m).reshape(len(centers), bins.el_count, bins.az_count)
     points = np.zeros((0, 3)) if toward_m is None else np.atleast_2d(np.asarray(toward_m, np.float64))
     toward = np.zeros((len(centers), 0))
     if len(points):
         offsets = (points[None, :, :] - centers[:, None, :]).reshape(-1, 3)
         offsets[np.all(offsets == 0, axis=1)] = (1.0, 0.0, 0.0)  # a point at the centre: any direction will do
-        toward = _cast(occupancy, np.repeat(centers, len(points), axis=0), offsets, outer_m,
-                       unknown_is_opaque).reshape(len(centers), len(points))
+        toward = _cast(occupancy, np.repeat(centers, len(points), axis=0), offsets,
+                       outer_m).reshape(len(centers), len(points))
     return SensedSpheres(bins, radius, occupancy.grid.resolution_m, toward)
 
 
-def _cast(occupancy: OccupancyGrid, origins: np.ndarray, directions: np.ndarray, outer_m: float,
-          unknown_is_opaque: bool) -> np.ndarray:
+def _cast(occupancy: OccupancyGrid, origins: np.ndarray, directions: np.ndarray, outer_m: float) -> np.ndarray:
     """Distance to the first obstacle from each origin along its direction, capped at ``outer_m``."""
-    hits = occupancy.cast_rays(origins, directions, outer_m, stop_at_unknown=unknown_is_opaque)
+    hits = occupancy.cast_rays(origins, directions, outer_m)
     return np.minimum(hits.distance_m, outer_m)
