@@ -51,7 +51,6 @@ class OccupancyConfig:
 class RayHits:
     distance_m: np.ndarray  # (N,) to the first occupied cube, the room's boundary, or max range
     hit: np.ndarray  # (N,) bool: stopped by an occupied cube or the boundary, not by max range
-    crossed_unknown: np.ndarray  # (N,) bool: passed through unknown space before stopping
 
 
 @dataclass(frozen=True)
@@ -171,17 +170,15 @@ class OccupancyGrid:
 
     def cast_rays(self, origins_m: np.ndarray, directions: np.ndarray, max_range_m: float) -> RayHits:
         """Walk each ray to the first occupied cube (or the room's boundary, or ``max_range_m``);
-        unknown space does not stop it, but is noted (:attr:`RayHits.crossed_unknown`)."""
+        unknown space does not stop it (the expected sensed spheres' optimistic choice)."""
         origins = np.ascontiguousarray((np.atleast_2d(origins_m) - self.grid.origin) / self.grid.resolution_m)
         dirs = np.atleast_2d(directions).astype(np.float64)
         dirs = np.ascontiguousarray(dirs / np.linalg.norm(dirs, axis=1, keepdims=True))
         if origins.shape[0] == 1 and dirs.shape[0] > 1:
             origins = np.ascontiguousarray(np.broadcast_to(origins, dirs.shape))
-        c = self.config
-        dist, hit, unknown = _cast_rays(self._log_odds, self._observed, origins, dirs,
-                                        max_range_m / self.grid.resolution_m, c.occupied_log_odds,
-                                        c.free_log_odds)
-        return RayHits(dist * self.grid.resolution_m, hit, unknown)
+        dist, hit = _cast_rays(self._log_odds, origins, dirs, max_range_m / self.grid.resolution_m,
+                               self.config.occupied_log_odds)
+        return RayHits(dist * self.grid.resolution_m, hit)
 
     def coarsened(self, factor: int) -> OccupancyGrid:
         """The same map in cubes ``factor`` times larger: a block is as occupied as its most occupied
@@ -373,33 +370,27 @@ def _walk_free(x0, y0, z0, x1, y1, z1, shape, frame, hit_stamp, touch_stamp, tou
 
 
 @numba.njit(cache=True, parallel=True)
-def _cast_rays(log_odds, observed, origins, dirs, max_steps, occupied_lo, free_lo):
+def _cast_rays(log_odds, origins, dirs, max_steps, occupied_lo):
     n = origins.shape[0]
     shape = log_odds.shape
     dist = np.empty(n)
     hit = np.zeros(n, np.bool_)
-    unknown = np.zeros(n, np.bool_)
     for r in numba.prange(n):
-        dist[r], hit[r], unknown[r] = _cast_one(log_odds, observed, origins[r], dirs[r], max_steps,
-                                                occupied_lo, free_lo, shape)
-    return dist, hit, unknown
+        dist[r], hit[r] = _cast_one(log_odds, origins[r], dirs[r], max_steps, occupied_lo, shape)
+    return dist, hit
 
 
 @numba.njit(cache=True)
-def _cast_one(log_odds, observed, start, direction, max_t, occupied_lo, free_lo, shape):
+def _cast_one(log_odds, start, direction, max_t, occupied_lo, shape):
     i, si, ti, di = _axis_setup(start[0], direction[0])
     j, sj, tj, dj = _axis_setup(start[1], direction[1])
     k, sk, tk, dk = _axis_setup(start[2], direction[2])
     t_entry = 0.0
-    crossed_unknown = False
     while t_entry <= max_t:
         if not (0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]):
-            return t_entry, True, crossed_unknown  # the room's boundary is known (report §3.1)
-        value = log_odds[i, j, k]
-        if value >= occupied_lo:
-            return t_entry, True, crossed_unknown
-        if not observed[i, j, k] or value > free_lo:
-            crossed_unknown = True
+            return t_entry, True  # the room's boundary is known (report §3.1)
+        if log_odds[i, j, k] >= occupied_lo:
+            return t_entry, True
         if ti <= tj and ti <= tk:
             t_entry = ti
             i += si
@@ -412,7 +403,7 @@ def _cast_one(log_odds, observed, start, direction, max_t, occupied_lo, free_lo,
             t_entry = tk
             k += sk
             tk += dk
-    return max_t, False, crossed_unknown
+    return max_t, False
 
 
 def _grown(mask: np.ndarray, axis: int, before: int, after: int, outside: bool) -> np.ndarray:

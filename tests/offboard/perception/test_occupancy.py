@@ -69,14 +69,15 @@ def test_a_ghost_fades_when_later_frames_see_through_it():
     assert occ.state()[tuple(ROOM.index_of(probe)[0])] == FREE
 
 
-def test_ray_casting_stops_at_the_first_occupied_cube_and_reports_unknown_space():
+def test_ray_casting_stops_at_the_first_occupied_cube_and_passes_unknown_space():
     occ = OccupancyGrid(ROOM)
     cam = _facing_east()
     occ.integrate_disparity(_wall_disparity(3.0), K, MOUNT.baseline_m, cam)
     rays = occ.cast_rays(cam.translation, np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 0, 1.0]]), 10.0)
-    assert rays.distance_m[0] == pytest.approx(3.0, abs=0.1) and rays.hit[0] and not rays.crossed_unknown[0]
-    assert rays.distance_m[1] == pytest.approx(1.0, abs=0.05) and rays.hit[1]  # the room's west wall
-    assert rays.crossed_unknown[1] and rays.crossed_unknown[2]  # never observed behind or above
+    assert rays.distance_m[0] == pytest.approx(3.0, abs=0.1) and rays.hit[0]
+    # never observed behind or above: the rays cross that space to the room's west wall and ceiling
+    assert rays.distance_m[1] == pytest.approx(1.0, abs=0.05) and rays.hit[1]
+    assert rays.distance_m[2] == pytest.approx(ROOM.size_m[2] - cam.translation[2], abs=0.05) and rays.hit[2]
     short = occ.cast_rays(cam.translation, np.array([[1.0, 0, 0]]), 1.0)
     assert not short.hit[0] and short.distance_m[0] == pytest.approx(1.0)
 
