@@ -5,8 +5,8 @@ the floor (a "scan" in the robot frame) and aligned with the map built from *ear
 room's walls (the room's extent is known, report §3.1):
 
 1. **likelihood field** (Thrun, Burgard & Fox, *Probabilistic Robotics* §6.4): the distance from every
-   floor cell to the nearest occupied column, by ``cv2.distanceTransform``, turned into a robust
-   per-point log-likelihood ``log(w·exp(-d²/2σ²) + 1 - w)``;
+   floor cell to the nearest occupied column, by an exact Euclidean distance transform, turned into a
+   robust per-point log-likelihood ``log(w·exp(-d²/2σ²) + 1 - w)``;
 2. **correlative search** (Olson 2009, "Real-time correlative scan matching"): the summed
    log-likelihood over a coarse (x, y, θ) grid around the predicted pose (the window widens to 3σ of
    the prediction up to a cap: 3σ of a half turn at the odometry model's 3 % is 16°, and a window
@@ -32,9 +32,9 @@ import logging
 import math
 from dataclasses import dataclass
 
-import cv2
 import numba
 import numpy as np
+from scipy import ndimage
 
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.stereo import points_from_disparity
@@ -131,8 +131,10 @@ def likelihood_field(occupied_xy: np.ndarray, resolution_m: float, config: Match
     room = room_xy if room_xy is not None else (nx * resolution_m, ny * resolution_m)
     occupied = np.pad(occupied_xy, pad_cells, constant_values=False)
     if occupied.any():
-        cells = cv2.distanceTransform((~occupied).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        d_map = cells.astype(np.float64) * resolution_m
+        # Not cv2.distanceTransform's exact mode: its float32 result changes in the last bits with
+        # OpenCV's thread count and buffer alignment (opencv/opencv#24082), and a scan match that
+        # tips on those bits made repeated runs of one scenario part by millimetres.
+        d_map = ndimage.distance_transform_edt(~occupied) * resolution_m
     else:
         d_map = np.full(occupied.shape, np.inf)
     centres = [_cell_centres(np.arange(n + 2 * pad_cells), pad_cells, resolution_m) for n in (nx, ny)]

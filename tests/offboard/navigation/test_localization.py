@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -80,6 +81,34 @@ def test_the_window_reaches_the_heading_error_of_a_half_turn():
     result = ScanMatcher().match(scan, prior, likelihood_field(box_outlines(), RES), after_half_turn)
     assert result.accepted, result.reason
     assert abs(math.degrees(result.pose.heading_rad - true_pose.heading_rad)) < 0.75
+
+
+def test_the_likelihood_field_is_exact_and_the_same_bits_on_every_call():
+    """Distances are the exact Euclidean ones, whatever OpenCV's thread count and the buffers'
+    alignment: a scan match can tip on the last bit, and then a repeated run parts from the first.
+    (OpenCV's exact transform gave up to 3 distinct fields for one map; opencv/opencv#24082.)"""
+    rng = np.random.default_rng(3)
+    occupied = np.zeros((200, 200), bool)
+    sources = rng.integers(80, 120, (6, 2))
+    occupied[sources[:, 0], sources[:, 1]] = True
+    config = MatchConfig()
+    threads = cv2.getNumThreads()
+    try:
+        fields = []
+        for n in (1, 2, 1, 2):
+            cv2.setNumThreads(n)
+            _ = np.empty(int(rng.integers(1, 50_000)))  # shift where the next buffers land
+            fields.append(likelihood_field(occupied, RES, config, pad_cells=0).values)
+    finally:
+        cv2.setNumThreads(threads)
+    assert all(np.array_equal(f, fields[0]) for f in fields)
+    centre = (np.indices(occupied.shape) + 0.5) * RES  # cell centres, metres
+    d_source = np.min(np.hypot(*(centre[..., None] - ((sources.T + 0.5) * RES)[:, None, None, :])), axis=-1)
+    d_wall = np.minimum(centre, 200 * RES - centre).min(axis=0)
+    nearer = d_source < d_wall
+    w = config.hit_weight
+    exact = np.log(w * np.exp(-0.5 * (d_source / config.sigma_m) ** 2) + 1.0 - w)
+    np.testing.assert_allclose(fields[0][nearer], exact[nearer], rtol=0.0, atol=1e-12)
 
 
 def test_a_single_wall_constrains_only_across_it():
