@@ -166,7 +166,7 @@ def structure_in_view(field: LikelihoodField, pose: Pose2D, pans_rad: np.ndarray
     ``sigma_m`` of mapped structure (an occupied column or a wall, beyond it too) in the camera's
     horizontal field of view, between ``min_range_m`` and the scan's range from the robot's centre:
     what a scan taken there could be matched against. Occlusion is ignored."""
-    # a cell exactly 1 σ away is in, whatever the rounding of the (float32) distance transform
+    # a cell exactly 1 σ away is in, whatever the rounding of the distance and the log
     i, j = np.nonzero(field.values >= _field_at(1.0, config) - 1e-6)
     xy = _cell_centres(np.stack([i, j], axis=1), field.pad_cells, field.resolution_m)
     d = xy - (pose.x_m, pose.y_m)
