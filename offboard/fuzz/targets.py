@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from offboard.planning.priors import HintsFile, load_hints
+from offboard.planning.priors import HintsFile
 from offboard.search.loop import SearchConfig
 from shared import toml_writer
 from shared.config import ConfigError, load_config
@@ -30,7 +30,7 @@ def offboard_targets() -> list[FuzzTarget]:
     return [
         toml_target("search config toml", lambda p: load_config(SearchConfig, p), ConfigError, [search],
                     SearchConfig),
-        toml_target("hints toml", load_hints, ConfigError, [HINTS], HintsFile),
+        toml_target("hints toml", lambda p: load_config(HintsFile, p).hint, ConfigError, [HINTS], HintsFile),
     ]
 
 

@@ -17,18 +17,15 @@ again is not counted again, and a checkpoint can carry that memory (:meth:`resto
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import cv2
 import numpy as np
 
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.voxel_grid import VoxelGrid
-from shared.config import ConfigError
 from shared.geometry import Intrinsics, RigidTransform
-from shared.strict import bounds, build
+from shared.strict import bounds
 
 
 @dataclass(frozen=True)
@@ -47,23 +44,14 @@ class HintBox:
 
 @dataclass(frozen=True)
 class HintsFile:
+    """A hints file: ``[[hint]]`` tables with ``min``, ``max``, ``weight`` and an optional ``name``
+    (read with ``shared.config.load_config``; this package does no I/O)."""
+
     hint: tuple[HintBox, ...]
 
     def __post_init__(self) -> None:
         if sum(h.weight for h in self.hint) > 1.0 + 1e-9:
             raise ValueError("the hints' weights add up to more than 1")
-
-
-def load_hints(path: Path) -> tuple[HintBox, ...]:
-    """``[[hint]]`` tables with ``min``, ``max``, ``weight`` and an optional ``name``."""
-    try:
-        data = tomllib.loads(Path(path).read_text())
-    except (OSError, ValueError, RecursionError) as exc:  # ValueError: TOML syntax, bad UTF-8, huge integers
-        raise ConfigError(str(path), None, f"cannot read hints: {exc}") from None
-    try:
-        return build(HintsFile, data, ConfigError).hint
-    except ConfigError as exc:
-        raise ConfigError(f"{path}: {exc.field}", exc.value, exc.problem) from None
 
 
 def uniform(grid: VoxelGrid) -> np.ndarray:

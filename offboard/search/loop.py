@@ -48,6 +48,7 @@ from offboard.perception.stereo import StereoConfig, StereoMatcher
 from offboard.planning.time_model import TimeModel
 from offboard.search.top_view import LookTrace, draw_top_view
 from offboard.perception.voxel_grid import VoxelGrid
+from shared.config import load_config
 from shared.geometry import Pose2D, RigidTransform
 from shared.messages import Capture, RobotState
 from shared.strict import bounds
@@ -605,7 +606,7 @@ def build_prior(grid: VoxelGrid, specs: list[str]) -> np.ndarray:
         if kind == "uniform":
             weighted.append((1.0, priors.uniform(grid)))
         elif kind == "hints":
-            weighted.append((1.0, priors.hints(grid, priors.load_hints(Path(arg)))))
+            weighted.append((1.0, priors.hints(grid, load_config(priors.HintsFile, Path(arg)).hint)))
         elif kind == "last-seen":
             values = [float(v) for v in arg.split(",")]
             weighted.append((1.0, priors.last_seen(grid, np.array(values[:3]), values[3] if len(values) > 3 else 0.0)))

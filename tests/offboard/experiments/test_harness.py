@@ -26,9 +26,10 @@ from offboard.experiments.world_facts import (DRIVE_CLEARANCE_M, Obstacle, Seein
                                        target_placements, true_floor_map, viewpoint)
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.planning.planner import PlannerConfig, SearchPlanner
-from offboard.planning.priors import HintBox, hints, load_hints
+from offboard.planning.priors import HintBox, HintsFile, hints
 from offboard.planning.time_model import TimeModel
 from offboard.perception.voxel_grid import VoxelGrid
+from shared.config import load_config
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
 
@@ -154,7 +155,7 @@ min = [4.0, 1.0, 0.0]
 max = [5.0, 2.0, 0.8]"""))
     hints_file = tmp_path / "tables.toml"
     hints_file.write_text(tables_hints(load_facts(str(world_file))))
-    boxes = {h.name: h for h in load_hints(hints_file)}
+    boxes = {h.name: h for h in load_config(HintsFile, hints_file).hint}
     assert set(boxes) == {"a", "b"}
     assert boxes["a"].min == (0.5, 3.0, 0.7) and boxes["a"].max == (2.5, 4.0, pytest.approx(1.0))
     assert boxes["b"].min[2] == 0.8 and boxes["b"].max[2] == pytest.approx(1.1)
@@ -197,7 +198,7 @@ def test_a_tables_prior_with_one_table_is_flagged_as_giving_the_target_away(tmp_
         'name = "crate"\nkind = "crate"', 'name = "desk"\nkind = "desk"'))
     run = Run("syt", str(world), (1.0, 1.0, 0.0), (3.2, 0.2, 0.5, 90.0), 3, "tables", 0)
     prepared = experiment._prepare([run], tmp_path / "out")
-    assert [h.name for h in load_hints(prepared[str(world)][2])] == ["desk"]
+    assert [h.name for h in load_config(HintsFile, prepared[str(world)][2]).hint] == ["desk"]
     assert any("one surface holds all its mass" in r.getMessage() for r in caplog.records if r.levelname == "WARNING")
 
 

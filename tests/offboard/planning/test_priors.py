@@ -1,12 +1,13 @@
 """The dynamic priors (report §3.4 types 2 and 4): what each raises, and that the map-driven one does
-not raise the same surface again."""
+not raise the same surface again; and the hints file of type 3."""
 
 import numpy as np
 import pytest
 
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.voxel_grid import VoxelGrid
-from offboard.planning.priors import Saliency, SupportSurfaces
+from offboard.planning.priors import HintsFile, Saliency, SupportSurfaces
+from shared.config import ConfigError, load_config
 from shared.geometry import Intrinsics, RigidTransform
 
 K = Intrinsics.from_fov(320, 240, 66.0)
@@ -69,3 +70,13 @@ def test_the_space_above_a_mapped_table_is_raised_once():
     restored = SupportSurfaces(grid)
     restored.restore(support.memory())
     assert np.all(restored.update(occupancy) == 1.0)
+
+
+def test_a_hints_file_is_read_as_a_config_and_refused_naming_the_file_and_the_problem(tmp_path):
+    path = tmp_path / "hints.toml"
+    box = 'min = [1.0, 1.0, 0.7]\nmax = [2.0, 2.0, 0.9]\nweight = {}\n'
+    path.write_text('[[hint]]\nname = "desk"\n' + box.format(0.6) + '[[hint]]\n' + box.format(0.3))
+    assert [(h.name, h.weight) for h in load_config(HintsFile, path).hint] == [("desk", 0.6), ("", 0.3)]
+    path.write_text('[[hint]]\n' + box.format(0.6) + '[[hint]]\n' + box.format(0.5))
+    with pytest.raises(ConfigError, match="hints.toml.*add up to more than 1"):
+        load_config(HintsFile, path)
