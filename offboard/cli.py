@@ -55,7 +55,8 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
                         help="uniform | hints:FILE | surfaces | saliency | last-seen:X,Y,Z[,S] (repeatable)")
     parser.add_argument("--budget-s", type=float, metavar="SECONDS",
                         help="robot-time budget K (default: the configuration's, 1800)")
-    parser.add_argument("--move-threshold", type=probability("--move-threshold"), default=None, metavar="P", help="Θ_move")
+    parser.add_argument("--move-threshold", type=probability("--move-threshold"), default=None, metavar="P",
+                        help="Θ_move: move by the report's threshold rule, not the default rate rule")
     parser.add_argument("--detector", choices=("sift", "ncc", "auto"), help="default: the configuration's, sift")
     parser.add_argument("--detectability", action="append", default=[], metavar="NAME=FILE",
                         help="a detector's measured detectability table (from calibrate-detector)")

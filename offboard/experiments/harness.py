@@ -495,7 +495,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--budget-s", type=float, metavar="SECONDS",
                         help="robot-time budget K (default: the --config file's, 1800)")
     parser.add_argument("--move-threshold", type=probability("--move-threshold"), metavar="P",
-                        help="Θ_move for the SYT runs (default: the planner's); give each value its own --out")
+                        help="Θ_move for the SYT runs, which then move by the report's threshold rule "
+                             "(default: the rate rule); give each value its own --out")
     parser.add_argument("--config", type=Path, metavar="FILE.toml",
                         help="search configuration (SearchConfig) for every run; give it its own --out")
     parser.add_argument("--limit", type=int, metavar="N", help="only the first N runs of the grid")

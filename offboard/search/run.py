@@ -36,7 +36,8 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class SearchRequest:
     """One search's options. ``room_m``, ``cost``, ``budget_s``, ``move_threshold`` and ``detector``
-    override the configuration file's values when given; None keeps the file's (or its default)."""
+    override the configuration file's values when given; None keeps the file's (or its default).
+    A ``move_threshold`` also selects the report's move rule, the only one that reads it."""
 
     pictures: tuple[Path, ...]
     target_size_m: tuple[float, float, float]
@@ -63,8 +64,9 @@ class SearchRequest:
 def search_config(request: SearchRequest) -> SearchConfig:
     """The configuration file's search (or the defaults), with the options the request gives."""
     base = load_config(SearchConfig, request.config_path)
+    threshold_rule = {} if request.move_threshold is None else {"move_rule": "threshold"}
     planner = dataclasses.replace(base.planner, **_given(cost_function=request.cost, budget_s=request.budget_s,
-                                                         move_threshold=request.move_threshold))
+                                                         move_threshold=request.move_threshold), **threshold_rule)
     facing = {"facing_sectors": 1} if request.target_sides == 4 else {}
     return dataclasses.replace(base, planner=planner, **_given(room_m=request.room_m, detector=request.detector),
                                **facing)

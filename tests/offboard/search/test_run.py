@@ -167,6 +167,11 @@ def test_a_configuration_file_keeps_the_values_no_option_overrides(tmp_path):
                                         budget_s=900.0))
     assert (given.room_m, given.detector, given.planner.cost_function, given.planner.budget_s) == \
         ((9.0, 5.0, 2.5), "sift", 4, 900.0)
+    assert kept.planner.move_rule == given.planner.move_rule == "rate"
+    # Θ_move is read only by the report's rule, so giving one selects that rule too
+    report = search_config(SearchRequest(pictures=(Path("t.png"),), target_size_m=(0.23, 0.23, 0.23),
+                                         config_path=config, move_threshold=0.2))
+    assert (report.planner.move_rule, report.planner.move_threshold) == ("threshold", 0.2)
 
 
 @pytest.mark.parametrize("spec, problem", [("surface", "unknown kind 'surface'"), ("hints", "needs a file"),
