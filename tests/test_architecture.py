@@ -51,9 +51,18 @@ def test_packages_import_only_what_the_architecture_allows(package):
     assert {f: bad for f, bad in offenders.items() if bad} == {}
 
 
+def test_imports_are_absolute_so_the_checks_above_see_them():
+    relative = [f"{path.relative_to(ROOT)}:{node.lineno}" for package in FORBIDDEN
+                for path in sorted((ROOT / package).rglob("*.py"))
+                for node in ast.walk(ast.parse(path.read_text(), filename=str(path)))
+                if isinstance(node, ast.ImportFrom) and node.level > 0]
+    assert relative == []
+
+
 @pytest.mark.parametrize("layer", sorted(OFFBOARD_LAYERS))
 def test_offboard_layers_import_only_those_below(layer):
     files = sorted((ROOT / "offboard" / layer).rglob("*.py"))
+    assert files, f"no sources found under offboard/{layer}/"
     allowed = OFFBOARD_LAYERS[layer] | {layer}
     offenders = {str(f.relative_to(ROOT)): sorted(_offboard_subpackages(f) - allowed) for f in files}
     assert {f: bad for f, bad in offenders.items() if bad} == {}
@@ -62,6 +71,7 @@ def test_offboard_layers_import_only_those_below(layer):
 @pytest.mark.parametrize("layer", sorted(PURE))
 def test_pure_layers_do_no_io(layer):
     files = sorted((ROOT / "offboard" / layer).rglob("*.py"))
+    assert files, f"no sources found under offboard/{layer}/"
     offenders = {str(f.relative_to(ROOT)): sorted(_imported_packages(f) & PURE[layer]) for f in files}
     assert {f: bad for f, bad in offenders.items() if bad} == {}
 

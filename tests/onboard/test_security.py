@@ -133,5 +133,5 @@ def test_the_robot_config_refuses_a_plain_listener(certs, tmp_path):
     config = TransportConfig(zenoh_config=certs / "zenoh-robot.json5", listen=("tcp/127.0.0.1:0",),
                              multicast_scouting=False).zenoh()
     assert json.loads(config.get_json("listen/endpoints")) == ["tcp/127.0.0.1:0"]  # the flag did override
-    with pytest.raises(zenoh.ZError):
+    with pytest.raises(zenoh.ZError, match="Unsupported protocol: tcp"):
         zenoh.open(config)

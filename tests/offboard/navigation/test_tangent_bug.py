@@ -101,6 +101,7 @@ def test_corridor():
     fmap = floor_map(occupied, RADIUS)
     step, _, visited = drive(fmap, (2.0, 3.0), (7.5, 3.0))  # out of the corridor, round, in behind
     assert step.status == "reached"
+    assert min(x for x, _ in visited) < 1.0  # it left through the open west end, x = 1.0
     step, _, _ = drive(fmap, (0.5, 3.0), (6.0, 3.0))  # along it
     assert step.status == "reached"
 

@@ -151,7 +151,7 @@ def test_a_coarsened_map_follows_frames_and_direct_writes_between_calls():
             coarse = occ.coarsened(factor)
             log_odds, observed = _pooled(occ, factor)
             assert np.array_equal(coarse.log_odds, log_odds) and np.array_equal(coarse.observed, observed)
-    with pytest.raises(ValueError):  # written through edit() only: coarsened() must know
+    with pytest.raises(ValueError, match="read-only"):  # written through edit() only: coarsened() must know
         occ.log_odds[0, 0, 0] = 1.0
 
 

@@ -140,14 +140,14 @@ def test_sad_recovers_two_planes():
 
 
 def test_bad_inputs_are_refused():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="multiple of 16"):
         StereoConfig(num_disparities=100)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="block_size must be odd"):
         StereoConfig(block_size=8)
     matcher = StereoMatcher(SMALL)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="differ in size"):
         matcher.disparity(np.zeros((H, W), np.uint8), np.zeros((H, W + 1), np.uint8))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="must be uint8"):
         matcher.disparity(np.zeros((H, W), np.float32), np.zeros((H, W), np.float32))
 
 

@@ -73,8 +73,7 @@ def test_the_search_finds_the_target_in_every_bundled_world(tmp_path, world, sta
     images = _recorded_images(out / "search.rrd")
     glances = images.pop(None, 0)  # on the robot's clock only, not on the action timeline
     assert images == Counter(range(1, summary["actions"] + 1)) and glances == summary["glances"]
-    assert summary["planning_ms_p50"] <= summary["planning_ms_p95"]
-    assert summary["robot_time_s"] > 0 and summary["distance_m"] >= 0
+    assert summary["robot_time_s"] > 0
     for line in (out / "looks.jsonl").read_text().splitlines():  # every look's processing, by stage
         look = json.loads(line)
         stages = [look[stage] for stage in ("occupancy_ms", "detection_ms") if stage in look]

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
@@ -117,12 +119,27 @@ def test_close_halts_and_releases_the_port(emulator, head):
     worker = threading.Thread(target=look)
     worker.start()
     time.sleep(0.3)
+    held = _descriptors_on(emulator.device_path)  # the driver's, and the emulator's own hold on its pty
     head.close()
     worker.join(timeout=2.0)
     time.sleep(0.05)
     assert not emulator.reading().moving and math.degrees(emulator.reading().pan_rad) < -1.0
     assert len(outcome) == 1  # the look ended: halted, or told the unit was closed
+    assert _descriptors_on(emulator.device_path) == held - 1  # the driver's port is released
     head.close()  # a second close does nothing
+
+
+def _descriptors_on(device: str) -> int:
+    """How many of this process's file descriptors are open on ``device`` (Linux's /proc)."""
+    fds = Path("/proc/self/fd")
+    return sum(1 for fd in fds.iterdir() if _target(fd) == os.path.realpath(device))
+
+
+def _target(fd: Path) -> str | None:
+    try:
+        return os.readlink(fd)
+    except OSError:  # closed between listing and reading
+        return None
 
 
 def test_silent_port_is_a_clear_error():

@@ -44,7 +44,8 @@ def test_each_world_draws_from_the_seed_and_its_own_name():
     assert sample_views("paper-lab", load_world("paper-lab"), 3, seed=5) != alone
 
 
-def test_bad_arguments_are_refused(tmp_path):
-    with pytest.raises(SystemExit):
+def test_bad_arguments_are_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit) as refused:
         main(["worlds", "views", "--worlds", "office", "--per-world", "0", "--out", str(tmp_path)])
+    assert refused.value.code == 2 and "--per-world: must be at least 1" in capsys.readouterr().err
     assert main(["worlds", "views", "--worlds", "no-such-room", "--out", str(tmp_path)]) == 2

@@ -172,11 +172,12 @@ def test_the_same_seed_writes_the_same_files(written, tmp_path):
     assert other[0].read_text() != written[0].read_text()
 
 
-def test_the_command_writes_the_files(tmp_path, written):
+def test_the_command_writes_the_files(tmp_path, written, capsys):
     assert main(["worlds", "generate", "--count", "1", "--seed", str(SEED), "--out", str(tmp_path)]) == 0
     assert (tmp_path / f"room-{SEED}-0.toml").read_bytes() == written[0].read_bytes()
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit) as refused:
         main(["worlds", "generate", "--count", "0", "--seed", "1", "--out", str(tmp_path)])
+    assert refused.value.code == 2 and "--count: must be at least 1" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("suite, seed", [("dev", 1000), ("test", 2000)])
