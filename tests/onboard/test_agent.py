@@ -253,19 +253,16 @@ def test_a_second_motion_while_moving_is_refused_and_stop_interrupts(tmp_path, b
 
 def test_sigterm_stops_the_base_and_exits_cleanly(tmp_path, box_world):
     with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):
-        threading.Thread(target=lambda: _ignore(robot.move, distance_m=4.0), daemon=True).start()
+        results = []
+        mover = threading.Thread(target=lambda: results.append(robot.move(distance_m=4.0)), daemon=True)
+        mover.start()
         _wait_until(lambda: robot.state().base_moving, 5.0)
         agent.process.send_signal(signal.SIGTERM)
         assert agent.process.wait(timeout=10) == 0
+        mover.join(timeout=5.0)
+        assert results and results[0].status == "stopped"  # the motion's own reply, sent before it exits
         _wait_until(lambda: not any(r.ok for r in robot.session.liveliness().get(robot.keys.agent_alive, timeout=0.3)), 5.0)
     assert "agent stopped; base stopped" in (tmp_path / "onboard.log").read_text()
-
-
-def _ignore(fn, **kwargs):
-    try:
-        fn(**kwargs)
-    except Exception:
-        pass
 
 
 def test_a_command_right_after_a_motion_reply_is_not_refused_as_busy(sim_agent):
