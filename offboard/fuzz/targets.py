@@ -30,7 +30,7 @@ def offboard_targets() -> list[FuzzTarget]:
     return [
         toml_target("search config toml", lambda p: load_config(SearchConfig, p), ConfigError, [search],
                     SearchConfig),
-        toml_target("hints toml", lambda p: load_config(HintsFile, p).hint, ConfigError, [HINTS], HintsFile),
+        toml_target("hints toml", lambda p: load_config(HintsFile, p), ConfigError, [HINTS], HintsFile),
     ]
 
 

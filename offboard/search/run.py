@@ -64,9 +64,10 @@ class SearchRequest:
 def search_config(request: SearchRequest) -> SearchConfig:
     """The configuration file's search (or the defaults), with the options the request gives."""
     base = load_config(SearchConfig, request.config_path)
-    threshold_rule = {} if request.move_threshold is None else {"move_rule": "threshold"}
+    threshold_rule = None if request.move_threshold is None else "threshold"
     planner = dataclasses.replace(base.planner, **_given(cost_function=request.cost, budget_s=request.budget_s,
-                                                         move_threshold=request.move_threshold), **threshold_rule)
+                                                         move_threshold=request.move_threshold,
+                                                         move_rule=threshold_rule))
     facing = {"facing_sectors": 1} if request.target_sides == 4 else {}
     return dataclasses.replace(base, planner=planner, **_given(room_m=request.room_m, detector=request.detector),
                                **facing)
