@@ -131,8 +131,8 @@ def test_close_halts_and_releases_the_port(emulator, head):
 
 def _descriptors_on(device: str) -> int:
     """How many of this process's file descriptors are open on ``device`` (Linux's /proc)."""
-    fds = Path("/proc/self/fd")
-    return sum(1 for fd in fds.iterdir() if _target(fd) == os.path.realpath(device))
+    path = os.path.realpath(device)
+    return sum(1 for fd in Path("/proc/self/fd").iterdir() if _target(fd) == path)
 
 
 def _target(fd: Path) -> str | None:
