@@ -84,7 +84,10 @@ def _within_budget(planner: SearchPlanner, decision: Decision, elapsed_s: float)
 
 
 class _Tour:
-    """Look around (every setting once, quickest first), then move where :meth:`_choose` says."""
+    """Look around (every setting once, quickest first), then move where :meth:`_choose` says.
+
+    A tour's memory is where it has looked from (``visited``): it never comes back, so it reads only
+    this stay's ``taken``, and confirms a detection with SYT's choice from that alone, as measured."""
 
     name = "tour"
 
@@ -94,7 +97,8 @@ class _Tour:
         self.goal: int | None = None  # the position of the last move
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
-               path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
+               path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
+               views: tuple[tuple[float, float, int], ...] = ()) -> Decision:
         decision = (self._confirm(pose, pan_rad, tilt_rad, elapsed_s, occupancy, path_lengths_m, taken)
                     or self._look_around(pose, pan_rad, tilt_rad, taken)
                     or self._next_position(pose, occupancy, np.asarray(path_lengths_m, float)))
@@ -208,7 +212,8 @@ class Oracle:
         self._sent_from_m: float | None = None  # how far from its viewpoint the last move began
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
-               path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
+               path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
+               views: tuple[tuple[float, float, int], ...] = ()) -> Decision:
         if self._from_start is None:
             self._from_start = self._seen_from((pose.x_m, pose.y_m))
             self.goal = (pose.x_m, pose.y_m) if self._from_start else None

@@ -164,14 +164,16 @@ class SearchPlanner:
         self.time_model = replace(self.time_model, drive_s_per_m=seconds)
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float,
-               occupancy: OccupancyGrid, path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision:
+               occupancy: OccupancyGrid, path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
+               views: tuple[tuple[float, float, int], ...] = ()) -> Decision:
         """The next action from ``pose`` (pan-tilt at ``pan_rad``, ``tilt_rad``), ``elapsed_s`` into the
         search; ``path_lengths_m`` is the navigation distance to each candidate (inf: unreachable);
-        ``taken``: the settings already looked at from this position (each is taken once, as in the
-        report: the same view again would repeat what the belief already accounts for)."""
+        ``taken``: the settings already looked at from this position; ``views``: (x, y, setting) of
+        every view taken so far. Each view is taken once, as in the report: the same view again would
+        repeat what the belief already accounts for, and eq. 4 would count its near-identical image as
+        new evidence."""
         values = self._values(pose, occupancy)
-        if taken:
-            values.find_prob[-1, sorted(taken)] = 0.0
+        self._drop_taken(values, pose, taken, views)
         here_detection = values.find_prob[-1]
         # What looking on here can still find: no more than the looks not yet taken here would (the
         # covering also counts what the taken views left behind, which no look here will see again).
@@ -236,6 +238,22 @@ class SearchPlanner:
         rates = np.zeros(len(self.positions))
         rates[reachable] = (found / spent).max(axis=1, initial=0.0)
         return rates
+
+    def _drop_taken(self, values: ActionValues, pose: Pose2D, taken: frozenset[int],
+                    views: tuple[tuple[float, float, int], ...]) -> None:
+        """Zero the detection probability of the looks already taken: ``taken`` here, and each of the
+        ``views`` from every position (here included) within ``same_position_m`` of where it was taken,
+        so that a robot that comes back to a place does not take its views again."""
+        if taken:
+            values.find_prob[-1, sorted(taken)] = 0.0
+        if not views:
+            return
+        taken_at = np.array(views, float)
+        places = np.vstack([self.positions, [pose.x_m, pose.y_m]])  # the rows of find_prob
+        near = np.hypot(places[:, None, 0] - taken_at[None, :, 0],
+                        places[:, None, 1] - taken_at[None, :, 1]) <= self.config.same_position_m
+        rows, which = np.nonzero(near)
+        values.find_prob[rows, taken_at[which, 2].astype(np.int64)] = 0.0
 
     def _away(self, pose: Pose2D) -> np.ndarray:
         """Candidates that are somewhere else: farther than ``same_position_m`` from the robot."""

@@ -241,6 +241,7 @@ _STATE_FIELDS = {
     "unreachable": lambda v: [tuple(p) for p in v],
     "looks": lambda v: [LookTrace(**look) for look in v],
     "estimate_m": lambda v: None if v is None else np.array(v, np.float64),
+    "views": lambda v: [tuple(p) for p in v],
     "taken": set,
     "retaken": set,
 }

@@ -104,7 +104,8 @@ class Policy(Protocol):
     """What chooses the next action: the SYT planner, or a baseline built around it (experiments)."""
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
-               path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset()) -> Decision: ...
+               path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
+               views: tuple[tuple[float, float, int], ...] = ()) -> Decision: ...
 
 
 @dataclass
@@ -123,6 +124,7 @@ class SearchState:
     unreachable: list[tuple[float, float]] = field(default_factory=list)  # goals the navigator could not reach
     taken: set[int] = field(default_factory=set)  # settings looked at since the robot last moved
     retaken: set[int] = field(default_factory=set)  # ... of those, the ones already looked at again to confirm
+    views: list[tuple[float, float, int]] = field(default_factory=list)  # (x, y, setting): not taken again there
     motion_s: float = 0.0  # robot clock: driving, slewing, capture
     processing_s: float = 0.0  # wall clock: capture transfer, stereo, detection, mapping, updates, planning
     driving_s: float = 0.0  # moves between positions: robot clock, and processing unless planned_processing_s is set
@@ -130,18 +132,20 @@ class SearchState:
     glances: int = 0  # frames the navigator took toward the motion, searched on the way (not looks)
     widened: bool = False  # the planner added its fallback tilts (SearchPlanner.widen)
 
-    def took(self, setting: int, located: bool) -> None:
-        """Book a look at ``setting`` from where the robot stands: it is not taken again from here,
-        except once after a ``located`` detection (one with stereo depth), to confirm it. The same
-        image a third time says nothing new, and a weak far detection would be looked at for ever;
-        one without depth needs another view to place it."""
+    def took(self, setting: int, located: bool, at_m: tuple[float, float]) -> None:
+        """Book a look at ``setting`` from ``at_m``, where the robot stands: it is not taken again from
+        there, on this stay or a later one (``views``), except once after a ``located`` detection (one
+        with stereo depth), to confirm it. The same image a third time says nothing new, and a weak far
+        detection would be looked at for ever; one without depth needs another view to place it."""
         self.taken.add(setting)
         if located and setting not in self.retaken:
             self.taken.discard(setting)
             self.retaken.add(setting)
+        else:
+            self.views.append((at_m[0], at_m[1], setting))
 
     def moved(self) -> None:
-        """Every setting is new again from a new position."""
+        """Every setting is new again from a new position, except the ``views`` taken near it before."""
         self.taken.clear()
         self.retaken.clear()
 
@@ -259,7 +263,7 @@ class Search:
         for goal in self.state.unreachable:
             paths[np.hypot(*(self.planner.positions - goal).T) < self.config.planner.same_position_m] = np.inf
         return (policy or self.policy).decide(pose, *self._pan_tilt, self.elapsed_s(), self.occupancy, paths,
-                                              frozenset(self.state.taken))
+                                              frozenset(self.state.taken), tuple(self.state.views))
 
     def _decide(self) -> Decision:
         pose = self._pose()
@@ -324,7 +328,7 @@ class Search:
         obs = self.perception.observe(capture, self.tracker.world_pose(capture.pose.to_pose()), detector)
         self.state.actions += 1
         realised, found = self._interpret(obs, table)
-        self.state.took(decision.setting, located=obs.target_m is not None)
+        self.state.took(decision.setting, located=obs.target_m is not None, at_m=(pose.x_m, pose.y_m))
         for prior in self.dynamic_priors:  # looks only: a glance repeats much of the last one's view, and
             factor = prior(obs, self)  # saliency multiplies in whatever each image shows
             if factor is not None:

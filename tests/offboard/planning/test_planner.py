@@ -213,6 +213,24 @@ def test_the_leave_margin_keeps_the_robot_looking_until_a_visit_is_that_many_tim
         assert planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose)).kind == kind
 
 
+def test_a_view_taken_on_an_earlier_stay_is_not_taken_again_from_that_place_here_or_as_a_candidate():
+    box = HintBox((1.8, 2.6, 0.9), (2.2, 3.0, 1.2), 0.5)
+    planner = _planner(3, boxes=(box,))
+    pose = Pose2D(2.0, 1.5, math.pi / 2)
+    first = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose))
+    assert first.kind == "look"
+    elsewhere = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose),
+                               views=((4.5, 0.5, first.setting),))
+    assert elsewhere.setting == first.setting  # taken 2.5 m away: a different view
+    came_back = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, pose),
+                               views=((2.2, 1.3, first.setting),))  # taken 0.28 m from here
+    assert came_back.setting != first.setting
+    assert came_back.values.find_prob[-1, first.setting] == 0.0
+    near = np.hypot(planner.positions[:, 0] - 2.2, planner.positions[:, 1] - 1.3) <= planner.config.same_position_m
+    assert near.any() and not came_back.values.find_prob[:-1][near, first.setting].any()
+    assert came_back.values.find_prob[:-1][~near, first.setting].any()
+
+
 def test_cost_1_moves_carry_their_setting_and_never_to_where_the_robot_stands():
     planner = _planner(1)
     d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))

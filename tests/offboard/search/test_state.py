@@ -7,29 +7,31 @@ import math
 from offboard.search.loop import SearchState, same_view
 from shared.geometry import HeadMount, Pose2D
 
+HERE = (2.0, 3.0)
+
 
 def test_a_setting_is_taken_once_from_a_position():
     state = SearchState()
-    state.took(3, located=False)
-    assert state.taken == {3}
+    state.took(3, located=False, at_m=HERE)
+    assert state.taken == {3} and state.views == [(2.0, 3.0, 3)]
 
 
 def test_a_located_detection_is_confirmed_from_the_same_view_once_and_only_once():
     state = SearchState()
-    state.took(5, located=True)
-    assert 5 not in state.taken  # free to look again: a second image confirms it
-    state.took(5, located=True)
-    assert 5 in state.taken  # a third image of the same view would say nothing new
+    state.took(5, located=True, at_m=HERE)
+    assert 5 not in state.taken and not state.views  # free to look again: a second image confirms it
+    state.took(5, located=True, at_m=HERE)
+    assert 5 in state.taken and state.views == [(2.0, 3.0, 5)]  # a third image would say nothing new
 
 
-def test_moving_makes_every_setting_new_again():
+def test_moving_makes_every_setting_new_again_but_keeps_the_views_taken_for_when_the_robot_comes_back():
     state = SearchState()
-    state.took(5, located=True)
-    state.took(5, located=True)
-    state.took(2, located=False)
+    state.took(5, located=True, at_m=HERE)
+    state.took(5, located=True, at_m=HERE)
+    state.took(2, located=False, at_m=HERE)
     state.moved()
-    assert not state.taken
-    state.took(5, located=True)
+    assert not state.taken and state.views == [(2.0, 3.0, 5), (2.0, 3.0, 2)]
+    state.took(5, located=True, at_m=HERE)
     assert 5 not in state.taken
 
 
