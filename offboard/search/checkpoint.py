@@ -138,7 +138,7 @@ def capture(search: Search) -> tuple[dict, dict[str, np.ndarray]]:
     search goes on)."""
     header, arrays = encode_maps(search.belief.state(), search.occupancy.log_odds, search.occupancy.observed)
     header["search"] = {
-        "state": {f.name: _plain(getattr(search.state, f.name)) for f in dataclasses.fields(SearchState)},
+        "state": state_plain(search.state),
         "clock_start_s": float(search._clock_start_s),
         "pending_processing_s": float(search._pending_processing_s),
         "planner_processing_s": float(search.planner.time_model.processing_s),
@@ -245,6 +245,10 @@ _STATE_FIELDS = {
     "taken": set,
     "retaken": set,
 }
+
+
+def state_plain(state: SearchState) -> dict:
+    return {f.name: _plain(getattr(state, f.name)) for f in dataclasses.fields(SearchState)}
 
 
 def state_from_plain(plain: dict) -> SearchState:

@@ -24,7 +24,7 @@ from offboard.planning.belief import TargetBelief
 from offboard.planning.planner import Decision
 from offboard.search import checkpoint
 from offboard.search.checkpoint import CheckpointError
-from offboard.search.loop import SearchConfig
+from offboard.search.loop import SearchConfig, SearchState
 from offboard.search.run import SearchRequest, dynamic_priors
 from onboard.sim.textures import load_picture
 from shared.geometry import Pose2D
@@ -119,6 +119,12 @@ def test_the_pose_tracker_comes_back_with_its_correction():
     assert resumed.world_pose(later) == tracker.world_pose(later)
     assert resumed.predict(later) == tracker.predict(later)
     assert np.array_equal(resumed.covariance, tracker.covariance)
+
+
+def test_the_search_history_comes_back_as_it_was_views_included():
+    state = SearchState(actions=3, positions=[(1.0, 2.0)], unreachable=[(2.5, 2.0)], taken={4, 1}, retaken={4},
+                        views=[(1.0, 2.0, 1), (3.5, 0.5, 7)], motion_s=12.5)
+    assert checkpoint.state_from_plain(json.loads(json.dumps(checkpoint.state_plain(state)))) == state
 
 
 def test_the_request_comes_back_with_absolute_paths(tmp_path, monkeypatch):
