@@ -86,8 +86,8 @@ def _within_budget(planner: SearchPlanner, decision: Decision, elapsed_s: float)
 class _Tour:
     """Look around (every setting once, quickest first), then move where :meth:`_choose` says.
 
-    A tour's memory is where it has looked from (``visited``): it never comes back, so it reads only
-    this stay's ``taken``, and confirms a detection with SYT's choice from that alone, as measured."""
+    A tour's memory is where it has looked from (``visited``): it does not go back there, so it reads
+    only this stay's ``taken``, and so does SYT's choice when the tour asks it to confirm a detection."""
 
     name = "tour"
 
