@@ -39,7 +39,7 @@ from offboard.navigation import grid_planner
 from offboard.experiments.world_facts import (ARRIVAL_MARGIN_M, DRIVE_CLEARANCE_M, SeeingCriteria, Truth,
                                               seeing_cells, true_floor_map, viewpoint)
 from offboard.perception.occupancy import OccupancyGrid
-from offboard.planning.planner import Decision, SearchPlanner
+from offboard.planning.planner import Decision, SearchPlanner, Views
 from offboard.search.loop import Policy
 from shared.geometry import Pose2D
 from shared.strict import bounds
@@ -98,7 +98,7 @@ class _Tour:
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
-               views: tuple[tuple[float, float, int], ...] = ()) -> Decision:
+               views: Views = ()) -> Decision:
         decision = (self._confirm(pose, pan_rad, tilt_rad, elapsed_s, occupancy, path_lengths_m, taken)
                     or self._look_around(pose, pan_rad, tilt_rad, taken)
                     or self._next_position(pose, occupancy, np.asarray(path_lengths_m, float)))
@@ -213,7 +213,7 @@ class Oracle:
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
-               views: tuple[tuple[float, float, int], ...] = ()) -> Decision:
+               views: Views = ()) -> Decision:
         if self._from_start is None:
             self._from_start = self._seen_from((pose.x_m, pose.y_m))
             self.goal = (pose.x_m, pose.y_m) if self._from_start else None

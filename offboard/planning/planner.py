@@ -52,6 +52,8 @@ from offboard.planning.viewpoints import AimedViewpoints, best_distance_m, grid_
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 from shared.strict import bounds
 
+Views = tuple[tuple[float, float, int], ...]  # (x, y, setting) of each view taken: not taken again near there
+
 
 @dataclass(frozen=True)
 class PlannerConfig:
@@ -165,7 +167,7 @@ class SearchPlanner:
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float,
                occupancy: OccupancyGrid, path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
-               views: tuple[tuple[float, float, int], ...] = ()) -> Decision:
+               views: Views = ()) -> Decision:
         """The next action from ``pose`` (pan-tilt at ``pan_rad``, ``tilt_rad``), ``elapsed_s`` into the
         search; ``path_lengths_m`` is the navigation distance to each candidate (inf: unreachable);
         ``taken``: the settings already looked at from this position; ``views``: (x, y, setting) of
@@ -240,7 +242,7 @@ class SearchPlanner:
         return rates
 
     def _drop_taken(self, values: ActionValues, pose: Pose2D, taken: frozenset[int],
-                    views: tuple[tuple[float, float, int], ...]) -> None:
+                    views: Views) -> None:
         """Zero the detection probability of the looks already taken: ``taken`` here, and each of the
         ``views`` from every position (here included) within ``same_position_m`` of where it was taken,
         so that a robot that comes back to a place does not take its views again."""

@@ -41,7 +41,7 @@ from offboard.navigation.localization import PoseTracker
 from offboard.navigation.navigator import Navigator
 from offboard.perception.occupancy import OccupancyConfig, OccupancyGrid
 from offboard.perception.observation import Observation, Perception
-from offboard.planning.planner import Decision, PlannerConfig, SearchPlanner
+from offboard.planning.planner import Decision, PlannerConfig, SearchPlanner, Views
 from offboard.search.recording import Recorder
 from offboard.robot.robot_client import RobotClient
 from offboard.perception.stereo import StereoConfig, StereoMatcher
@@ -105,7 +105,7 @@ class Policy(Protocol):
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
-               views: tuple[tuple[float, float, int], ...] = ()) -> Decision: ...
+               views: Views = ()) -> Decision: ...
 
 
 @dataclass
