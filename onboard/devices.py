@@ -19,7 +19,7 @@ from shared.limits import BaseLimits, PanTiltLimits
 @dataclass(frozen=True)
 class MotionOutcome:
     status: Literal["done", "stalled", "stopped"]
-    distance_m: float  # distance actually driven
+    distance_m: float  # distance actually driven, along the command: never negative
     duration_s: float  # robot time the motion took
 
 

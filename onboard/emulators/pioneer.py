@@ -258,7 +258,7 @@ class PioneerServerState:
         m, pose = self.motion, self.odometry()
         half_diff = math.radians(m.turn_deg_s) / arcos.DIFF_CONV_FACTOR
         left, right = (0, 0) if m.stalled else (round(m.speed_mm_s - half_diff), round(m.speed_mm_s + half_diff))
-        pushing = m.stalled and m.speed_mm_s != 0.0
+        pushing = m.stalled and (m.speed_mm_s != 0.0 or m.turn_deg_s != 0.0)  # the wheels push, turning or driving
         control = m.heading_goal_rad if m.heading_goal_rad is not None else pose.heading_rad
         return arcos.Sip(moving=m.speed_mm_s != 0.0 or m.turn_deg_s != 0.0,
                          x_raw=round(pose.x_m * 1000.0 / self._conv), y_raw=round(pose.y_m * 1000.0 / self._conv),

@@ -138,9 +138,10 @@ class PioneerBase:
             except BaseException:
                 self.stop()
                 raise
-            if status == "stopped":
+            if status != "done":  # stopped, or stalled: the last RVEL or VEL would push on (PULSE feeds the watchdog)
                 self.stop()
-            return MotionOutcome(status, driven, time.monotonic() - started)
+            # odometry can creep back a few millimetres at a stall; the distance driven is never negative
+            return MotionOutcome(status, max(0.0, driven), time.monotonic() - started)
 
     def stop(self) -> None:
         """VEL 0 and RVEL 0 at once, from any thread; a running move ends as ``stopped``."""
@@ -214,7 +215,6 @@ class PioneerBase:
         while True:
             driven = sign * ((status.pose.x_m - origin.x_m) * along[0] + (status.pose.y_m - origin.y_m) * along[1])
             if status.stalled:
-                self._send_motion(Command.VEL, 0)
                 return "stalled", driven
             if braking and sent == 0 and abs(status.speed_m_s) < _STILL_M_S:
                 return "done", driven

@@ -12,7 +12,7 @@ import pytest
 import serial
 from conftest import wait_until
 
-from onboard.devices import MotionOutcome
+from onboard.devices import BaseReading, MotionOutcome
 from onboard.emulators.pioneer import PioneerEmulator, PioneerEmulatorConfig, PioneerServerState
 from onboard.emulators.tcp import TcpPort
 from onboard.hardware import arcos
@@ -121,6 +121,58 @@ def test_driving_into_a_wall_is_a_stall(room_base):
             assert wait_until(lambda: not driver.reading().moving, 3.0)  # told to stop: its ramp ends, not pushing on
         finally:
             driver.close()
+
+
+class _JammedBase:
+    """The simulated base with a jam its round footprint never meets: while ``jammed`` the wheels push
+    and the base does not move, after slipping back ``slip_m`` once (a wheel that gives, then binds)."""
+
+    def __init__(self, base: SimBase, slip_m: float = 0.0):
+        self.base, self.slip_m, self.jammed = base, slip_m, True
+
+    def step_velocity(self, speed_m_s: float, turn_rate_rad_s: float, dt_s: float) -> bool:
+        if not self.jammed or (speed_m_s == 0.0 and turn_rate_rad_s == 0.0):
+            return self.base.step_velocity(speed_m_s, turn_rate_rad_s, dt_s)
+        if self.slip_m:
+            self.base.teleport(self.base.true_pose.moved(-self.slip_m))
+            self.slip_m = 0.0
+        return False
+
+    def reading(self) -> BaseReading:
+        return self.base.reading()
+
+
+def _jammed_driver(emulator: PioneerEmulator, base: SimBase) -> PioneerBase:
+    return PioneerBase(PioneerConfig(port=emulator.path, **FAST_LINK), LIMITS, start=base.true_pose)
+
+
+def test_a_stall_while_turning_stops_the_turn(sim_base):
+    jammed = _JammedBase(sim_base)
+    with PioneerEmulator(PioneerServerState(jammed, PioneerEmulatorConfig())) as emu:
+        driver = _jammed_driver(emu, sim_base)
+        try:
+            assert driver.move(math.radians(90), 0.5, 0.3, threading.Event()).status == "stalled"
+            assert wait_until(lambda: emu.snapshot()[3] == 0.0, 2.0)  # told to stop, the wheels wind down
+            jammed.jammed = False  # freed: a robot still told to turn would spin on now (PULSE feeds its watchdog)
+            time.sleep(1.0)
+            assert sim_base.true_pose.heading_rad == pytest.approx(0.0, abs=1e-9)
+            motion = [c for c in emu.history() if c[0] in (Command.VEL, Command.RVEL, Command.HEAD)]
+            assert motion[-2:] == [(Command.VEL, 0), (Command.RVEL, 0)]
+        finally:
+            driver.close()
+
+
+def test_a_base_that_slips_back_at_a_stall_reports_no_negative_distance(sim_base):
+    """MoveResult's distance is at least 0: the planner refuses a reply that says otherwise."""
+    jammed = _JammedBase(sim_base, slip_m=0.004)
+    with PioneerEmulator(PioneerServerState(jammed, PioneerEmulatorConfig(subtype="p3dx-sh"))) as emu:
+        driver = _jammed_driver(emu, sim_base)
+        try:
+            outcome = driver.move(0.0, 0.5, 0.3, threading.Event())
+            assert driver.reading().pose.x_m == pytest.approx(1.496, abs=0.001)  # odometry saw the slip
+        finally:
+            driver.close()
+    assert outcome.status == "stalled" and outcome.distance_m == 0.0
 
 
 def test_link_drop_faults_refuses_motion_and_reconnects(driver, emulator):
