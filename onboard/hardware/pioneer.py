@@ -124,9 +124,9 @@ class PioneerBase:
         self.wire_times.move_called_s, self.wire_times.move_wire_s = time.perf_counter(), None
         with self._motion_lock:
             self._current()  # refused at once while the link is down
-            if cancel.is_set():  # stopped before it began: not one motion command goes out
-                return MotionOutcome("stopped", 0.0, 0.0)
-            with self._write_lock:
+            with self._write_lock:  # a stop from now on either finds the cancel set here or halts the writes
+                if cancel.is_set():  # stopped before it began: not one motion command goes out
+                    return MotionOutcome("stopped", 0.0, 0.0)
                 self._halted = False
             self._ensure_enabled(cancel)
             started = time.monotonic()
