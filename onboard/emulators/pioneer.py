@@ -312,8 +312,8 @@ class PioneerEmulator:
         self._terminal = terminal or PseudoTerminal()
         self._reader = arcos.PacketReader()
         self._stop = threading.Event()
-        self._plugged = threading.Event()
-        self._plugged.set()
+        self._hears, self._talks = threading.Event(), threading.Event()  # the cable's two lines
+        self.plug()
         self._lock = threading.Lock()  # the state is read by tests while the thread runs it
         self._thread = threading.Thread(target=self._serve, name="pioneer-emulator", daemon=True)
 
@@ -327,12 +327,16 @@ class PioneerEmulator:
         log.info("Pioneer emulator (%s) on %s", self.state.config.subtype, self.path)
         return self
 
-    def unplug(self) -> None:
-        """Cut the cable: bytes both ways are lost; the robot runs on (its watchdog will halt it)."""
-        self._plugged.clear()
+    def unplug(self, still_hears: bool = False) -> None:
+        """Cut the cable: bytes both ways are lost; the robot runs on (its watchdog will halt it).
+        ``still_hears``: only the robot's transmit line fails, so it still hears the host."""
+        self._talks.clear()
+        if not still_hears:
+            self._hears.clear()
 
     def plug(self) -> None:
-        self._plugged.set()
+        self._hears.set()
+        self._talks.set()
 
     def snapshot(self) -> tuple[bool, bool, float, float]:
         """(session open, watchdog tripped, speed mm/s, turn rate deg/s), for tests."""
@@ -363,10 +367,10 @@ class PioneerEmulator:
             replies: list[bytes] = []
             with self._lock:
                 now = time.monotonic()
-                if data and self._plugged.is_set():
+                if data and self._hears.is_set():
                     for packet in self._reader.feed(data):
                         replies += self.state.receive(packet, now)
                 replies += self.state.step(now)
-            if self._plugged.is_set():
+            if self._talks.is_set():
                 for reply in replies:
                     self._terminal.write(reply)

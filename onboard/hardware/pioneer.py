@@ -370,8 +370,15 @@ class PioneerBase:
                 self._write_locked(arcos.build_packet(Command.PULSE))
 
     def _lose_link(self, why: str) -> None:
+        """Refuse motion until the link is back. The robot may still hear us when it has gone silent,
+        and the SYNC0 of every reconnection attempt is a PULSE that feeds its watchdog, so it is told
+        to stop first: else it would drive on with its last motion command."""
         log.error("Pioneer on %s: link down (%s); motion refused until it reconnects", self.config.port, why)
         with self._write_lock:
+            try:
+                self._write_locked(arcos.build_packet(Command.STOP))
+            except (DeviceFault, serial.SerialException, OSError):
+                pass  # the robot's watchdog is what is left
             self._fault = why
             port, self._port = self._port, None
         with self._status_changed:

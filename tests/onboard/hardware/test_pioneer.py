@@ -200,6 +200,22 @@ def test_link_drop_faults_refuses_motion_and_reconnects(driver, emulator):
     assert outcome.status == "done" and outcome.distance_m == pytest.approx(0.2, abs=0.02)
 
 
+def test_a_robot_gone_silent_but_still_listening_is_told_to_stop(driver, emulator):
+    """Only the robot's transmit line fails: the reconnection's SYNC0s reach it and, being PULSEs,
+    would keep its watchdog from ever halting the last motion."""
+    with ThreadPoolExecutor(1) as pool:
+        running = pool.submit(driver.move, 0.0, 3.0, 0.3, threading.Event())
+        assert wait_until(lambda: driver.reading().speed_m_s > 0.2, 3.0)
+        emulator.unplug(still_hears=True)
+        with pytest.raises(DeviceFault, match="link down|no status"):
+            running.result(timeout=2.0)
+    assert wait_until(lambda: emulator.snapshot()[2] == 0.0, 1.5)  # before the watchdog's 2 s could
+    assert (Command.STOP, None) in emulator.history()
+    time.sleep(2.5)  # SYNC0s keep coming, and the robot stays still
+    assert emulator.snapshot()[2] == 0.0 and not emulator.snapshot()[1]
+    assert emulator.history()[-1] == (Command.SYNC0, None)
+
+
 def test_idle_driver_keeps_the_watchdog_quiet(driver, emulator):
     time.sleep(2.5)
     assert not emulator.snapshot()[1]
