@@ -316,6 +316,7 @@ class PioneerBase:
             first = _wait_for(port, PacketReader(), lambda p: p.id in arcos.SIP_TYPES, c.link_timeout_ms / 1000.0)
             if first is None:
                 raise DeviceFault(f"Pioneer on {c.port}: no status packet after OPEN")
+            sip = arcos.parse_sip(first)
             for packet in self._setup_packets():
                 port.write(packet)
                 time.sleep(c.command_gap_ms / 1000.0)
@@ -328,7 +329,7 @@ class PioneerBase:
         self._last_write_s = time.monotonic()
         log.info("Pioneer on %s: %s %s %s connected", c.port, self.identity.name, self.identity.type,
                  self.identity.subtype)
-        self._on_sip(arcos.parse_sip(first), session)
+        self._on_sip(sip, session)
         return port, session
 
     def _setup_packets(self) -> list[bytes]:

@@ -216,6 +216,27 @@ def test_a_robot_gone_silent_but_still_listening_is_told_to_stop(driver, emulato
     assert emulator.history()[-1] == (Command.SYNC0, None)
 
 
+class _GarbledFirstStatus(PioneerServerState):
+    """A robot whose first status packet of a session is cut short, its checksum intact."""
+
+    garbled = False
+
+    def step(self, now_s: float) -> list[bytes]:
+        sips = super().step(now_s)
+        if sips and not self.garbled:
+            self.garbled = True
+            return [arcos.frame(bytes([0x32]) + b"\x00" * 6)]
+        return sips
+
+
+def test_a_garbled_first_status_is_a_device_fault(sim_base):
+    """Not an ArcosError escaping the driver: at start-up that would pass the agent's device checks,
+    and in a reconnection it would end the link thread for good."""
+    with PioneerEmulator(_GarbledFirstStatus(sim_base, PioneerEmulatorConfig())) as emu:
+        with pytest.raises(DeviceFault, match="while connecting"):
+            PioneerBase(PioneerConfig(port=emu.path, **FAST_LINK), LIMITS, start=sim_base.true_pose)
+
+
 def test_idle_driver_keeps_the_watchdog_quiet(driver, emulator):
     time.sleep(2.5)
     assert not emulator.snapshot()[1]
