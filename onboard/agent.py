@@ -267,7 +267,8 @@ class Agent:
         return turn_rad, distance_m
 
     def _on_stop(self, query: zenoh.Query, cmd: m.StopCommand) -> None:
-        self._stop_all("stop command")
+        if failed := self._stop_all("stop command"):
+            raise CommandRefused("device", "; ".join(failed))
         deadline = time.monotonic() + 2.0
         while self.devices.base.reading().moving and time.monotonic() < deadline:
             time.sleep(0.002)
@@ -386,12 +387,21 @@ class Agent:
             else:
                 wait_s = min(wait_s, timeout_s - silent_s)  # wake on the deadline itself
 
-    def _stop_all(self, why: str) -> None:
+    def _stop_all(self, why: str) -> list[str]:
+        """Cancel every job, stop the base and halt the head, each even if another fails: this runs on
+        the watchdog's and the dispatcher's threads, which must outlive a dead device. Returns what
+        did not stop, one line a device."""
         log.warning("stopping the base: %s", why)
         for cancel in self._cancel.values():
             cancel.set()
-        self.devices.base.stop()
-        self.devices.pantilt.halt()
+        failed = []
+        for name, stop in (("base", self.devices.base.stop), ("pan-tilt", self.devices.pantilt.halt)):
+            try:
+                stop()
+            except Exception as exc:  # whatever a backend raises, the next device must still be stopped
+                log.exception("the %s did not stop", name)
+                failed.append(f"the {name} did not stop: {type(exc).__name__}: {exc}")
+        return failed
 
     # --- replies -------------------------------------------------------------------------------------
 

@@ -279,6 +279,8 @@ class PtuEmulator:
         self._pty = PseudoTerminal()
         self.device_path = self._pty.path
         self._stop = threading.Event()
+        self._plugged = threading.Event()
+        self._plugged.set()
         self._thread = threading.Thread(target=self._serve, name="ptu-emulator", daemon=True)
 
     def __enter__(self) -> PtuEmulator:
@@ -304,6 +306,13 @@ class PtuEmulator:
         with self._lock:
             self._pty.write(data)
 
+    def unplug(self) -> None:
+        """Cut the cable: the unit hears nothing and says nothing; the head finishes its slew."""
+        self._plugged.clear()
+
+    def plug(self) -> None:
+        self._plugged.set()
+
     def close(self) -> None:
         self._stop.set()
         if self._thread.is_alive():
@@ -320,4 +329,7 @@ class PtuEmulator:
                 time.sleep(self._tick_s)
             with self._lock:
                 now = time.monotonic()
-                self._pty.write(self.machine.receive(data, now) if data else self.machine.advance(now))
+                heard = data if self._plugged.is_set() else b""
+                said = self.machine.receive(heard, now) if heard else self.machine.advance(now)
+                if self._plugged.is_set():
+                    self._pty.write(said)

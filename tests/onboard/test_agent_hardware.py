@@ -1,15 +1,19 @@
-"""The agent over the hardware backend (the real drivers, the emulators on pseudo-terminals) when the
-Pioneer's serial link drops: state and motion are refused as ``device`` errors while it is down,
-the agent keeps serving, and once the cable is back the driver reconnects and publishing resumes."""
+"""The agent over the hardware backend (the real drivers, the emulators on pseudo-terminals) when a
+device's cable is pulled. The Pioneer's: state and motion are refused as ``device`` errors while it
+is down, the agent keeps serving, and once the cable is back the driver reconnects and publishing
+resumes. The pan-tilt's: the stops that halt it fail, and the agent's watchdog and commands live on."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import itertools
 import threading
 import time
+from collections.abc import Iterator
 
 import pytest
+import zenoh
 from conftest import wait_until
 
 from onboard.agent import Agent
@@ -27,6 +31,7 @@ from shared.transport import TransportConfig
 
 pytestmark = pytest.mark.integration
 
+KEYS = RobotKeys("hw")
 FAST_LINK = dict(link_timeout_ms=300, reconnect_period_ms=200, sync_reply_timeout_ms=200, stale_session_wait_ms=100)
 _ids = (f"c{i}" for i in itertools.count())
 
@@ -41,12 +46,14 @@ def _ask(session, key: str, command, expected):
         return "unavailable"
 
 
-def test_a_dropped_serial_link_is_a_device_error_then_the_agent_serves_again():
+@contextlib.contextmanager
+def _hardware_agent(watchdog_ms: int) -> Iterator[tuple[EmulatedRobot, zenoh.Session]]:
+    """The agent in this process over the hardware backend, the emulators on pseudo-terminals, and a
+    planner's session to it."""
     world = load_world("paper-lab")
-    keys = RobotKeys("hw")
     with EmulatedRobot(OnboardConfig(), world, "paper-lab") as emulated:
         ports = emulated.ports()
-        config = dataclasses.replace(OnboardConfig(), backend="hardware", watchdog_ms=10_000,  # no heartbeats here
+        config = dataclasses.replace(OnboardConfig(), backend="hardware", watchdog_ms=watchdog_ms,
                                      hardware=HardwareConfig(
             PioneerConfig(port=ports["base"], **FAST_LINK), PtuConfig(port=ports["pantilt"]), truth=ports["truth"]))
         devices = build_robot(config, world).devices
@@ -57,25 +64,49 @@ def test_a_dropped_serial_link_is_a_device_error_then_the_agent_serves_again():
         runner.start()
         try:
             with TransportConfig(robot_id="hw", connect=(endpoint,), multicast_scouting=False).open() as session:
-                published: list[float] = []
-                session.declare_subscriber(keys.odometry, lambda _: published.append(time.monotonic()))
-                state = lambda: _ask(session, keys.state, m.StateRequest(next(_ids)), m.StateReply)  # noqa: E731
-                assert wait_until(lambda: isinstance(state(), m.StateReply), 10.0)
-
-                emulated.pioneer.unplug()
-                assert wait_until(lambda: state() == "device", 3.0)
-                move = m.MoveCommand(next(_ids), distance_m=0.5)
-                assert _ask(session, keys.move, move, m.MoveResult) == "device"
-                quiet_since = time.monotonic()
-
-                emulated.pioneer.plug()
-                assert wait_until(lambda: isinstance(state(), m.StateReply), 5.0)
-                assert wait_until(lambda: any(t > quiet_since for t in published), 2.0)  # publishing resumed
-                moved = _ask(session, keys.move, m.MoveCommand(next(_ids), distance_m=0.2), m.MoveResult)
-                # The driver brakes on SIPs 100 ms apart: on a loaded machine one arrives late, and the
-                # base rolls on for up to a period at speed (~3 cm) beyond its 2 cm tolerance.
-                assert moved.status == "done" and moved.distance_m == pytest.approx(0.2, abs=0.05)
+                yield emulated, session
         finally:
             stop.set()
             runner.join(timeout=10.0)
             agent_session.close()
+
+
+def _state(session: zenoh.Session):
+    return _ask(session, KEYS.state, m.StateRequest(next(_ids)), m.StateReply)
+
+
+def test_a_dropped_serial_link_is_a_device_error_then_the_agent_serves_again():
+    with _hardware_agent(watchdog_ms=10_000) as (emulated, session):  # no heartbeats here
+        published: list[float] = []
+        session.declare_subscriber(KEYS.odometry, lambda _: published.append(time.monotonic()))
+        assert wait_until(lambda: isinstance(_state(session), m.StateReply), 10.0)
+
+        emulated.pioneer.unplug()
+        assert wait_until(lambda: _state(session) == "device", 3.0)
+        move = m.MoveCommand(next(_ids), distance_m=0.5)
+        assert _ask(session, KEYS.move, move, m.MoveResult) == "device"
+        quiet_since = time.monotonic()
+
+        emulated.pioneer.plug()
+        assert wait_until(lambda: isinstance(_state(session), m.StateReply), 5.0)
+        assert wait_until(lambda: any(t > quiet_since for t in published), 2.0)  # publishing resumed
+        moved = _ask(session, KEYS.move, m.MoveCommand(next(_ids), distance_m=0.2), m.MoveResult)
+        # The driver brakes on SIPs 100 ms apart: on a loaded machine one arrives late, and the
+        # base rolls on for up to a period at speed (~3 cm) beyond its 2 cm tolerance.
+        assert moved.status == "done" and moved.distance_m == pytest.approx(0.2, abs=0.05)
+
+
+def test_a_pan_tilt_that_cannot_halt_leaves_the_watchdog_and_the_commands_alive():
+    """Every stop halts the head too. A unit that does not answer must not take the thread that
+    stops with it: the watchdog stops a second silent move as it did the first, and a planner's
+    stop is answered with the device that did not stop."""
+    with _hardware_agent(watchdog_ms=800) as (emulated, session):
+        assert wait_until(lambda: isinstance(_state(session), m.StateReply), 10.0)
+        emulated.ptu.unplug()
+        for _ in range(2):  # nobody speaks after the move: the watchdog stops it after 0.8 s
+            moved = _ask(session, KEYS.move, m.MoveCommand(next(_ids), distance_m=1.5, speed_m_s=0.3), m.MoveResult)
+            assert moved.status == "stopped" and moved.distance_m < 0.6
+        with pytest.raises(CommandError, match="the pan-tilt did not stop") as stopped:
+            request(session, KEYS.stop, m.StopCommand(next(_ids)), m.StopResult, 5.0)
+        assert stopped.value.code == "device"
+        assert isinstance(_state(session), m.StateReply)  # and the agent serves on
