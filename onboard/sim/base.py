@@ -66,8 +66,9 @@ class SimBase:
         self._step_s = step_s
         self._lock = threading.Lock()
         self._halt = threading.Event()
-        self._truth = world.start
-        self._odom = world.start  # the robot is told where it starts; it drifts from there
+        start = world.start  # a world may say 400°: headings are kept within ±180°, as teleport keeps them
+        self._truth = self._odom = Pose2D(start.x_m, start.y_m, wrap_angle(start.heading_rad))
+        # the robot is told where it starts; its odometry drifts from there
         self._speed = 0.0
         self._turn_rate = 0.0
         self._moving = False

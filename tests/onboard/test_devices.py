@@ -41,14 +41,14 @@ class Rig:
     distance_m: float  # how close a drive ends to its goal
 
 
-def _world() -> World:
-    return load_world("paper-lab").with_start(*START)
+def _world(start: tuple[float, float, float] = START) -> World:
+    return load_world("paper-lab").with_start(start[0], start[1], math.radians(start[2]))
 
 
 @contextlib.contextmanager
-def _sim(realtime: bool) -> Iterator[Rig]:
+def _sim(realtime: bool, start: tuple[float, float, float] = START) -> Iterator[Rig]:
     config = dataclasses.replace(OnboardConfig(), sim=SimConfig(realtime=realtime))
-    robot = build_robot(config, _world())
+    robot = build_robot(config, _world(start))
     try:
         yield Rig(robot.devices, lambda: robot.sim.true_pose, 0.02, 1e-6)
     finally:
@@ -56,15 +56,15 @@ def _sim(realtime: bool) -> Iterator[Rig]:
 
 
 @contextlib.contextmanager
-def _hardware(realtime: bool) -> Iterator[Rig]:
+def _hardware(realtime: bool, start: tuple[float, float, float] = START) -> Iterator[Rig]:
     """Real time whatever ``realtime`` says: the emulators run on the wall clock."""
     base = OnboardConfig()
-    with EmulatedRobot(base, _world(), "paper-lab") as emulated:
+    with EmulatedRobot(base, _world(start), "paper-lab") as emulated:
         ports = emulated.ports()
         config = dataclasses.replace(base, backend="hardware", hardware=HardwareConfig(
             PioneerConfig(port=ports["base"]), PtuConfig(port=ports["pantilt"]),
             truth=ports["truth"]))
-        robot = build_robot(config, _world())
+        robot = build_robot(config, _world(start))
         try:
             yield Rig(robot.devices, lambda: emulated.truth().pose, 0.25, 0.03)
         finally:
@@ -124,6 +124,13 @@ def test_base_stalls_against_a_shelf(rig):
     outcome = rig.devices.base.move(0.0, -1.5, 0.4, threading.Event())
     assert outcome.status == "stalled" and outcome.distance_m < 1.0
     assert rig.true_pose().x_m == pytest.approx(0.45 + rig.devices.base.limits.radius_m, abs=0.03)
+
+
+@pytest.mark.parametrize("backend", list(BACKENDS.values()), ids=list(BACKENDS))
+def test_a_start_heading_past_a_full_turn_reads_within_a_half_turn(backend):
+    """A world may start the robot at 400°; the pose messages carry no more than ±360°."""
+    with backend(realtime=False, start=(START[0], START[1], 400.0)) as made:
+        assert made.devices.base.reading().pose.heading_rad == pytest.approx(math.radians(40.0))
 
 
 def test_limits_refuse_what_the_device_cannot_reach(rig):
