@@ -183,6 +183,11 @@ class World:
         """Obstacles standing on the floor (they block the robot base)."""
         return tuple(b for b in self.obstacles if b.min_m[2] < FLOOR_OBSTACLE_MAX_Z_M)
 
+    def base_blockers(self, height_m: float = FLOOR_OBSTACLE_MAX_Z_M) -> tuple[Box, ...]:
+        """What a base this tall runs into: the obstacles, and the target (on the floor, say), whose
+        bottom lies below ``height_m``."""
+        return tuple(b for b in (*self.obstacles, self.target.box()) if b.min_m[2] < height_m)
+
 
 def bundled_world_names() -> list[str]:
     return sorted(p.stem for p in WORLDS_DIR.glob("*.toml"))
@@ -477,10 +482,7 @@ def _validate_start(world: World, size: np.ndarray) -> None:
     if not (r <= x <= size[0] - r and r <= y <= size[1] - r):
         raise WorldError(f"robot.start: the robot disc (radius {r} m) at ({x:.3f}, {y:.3f}) "
                          f"is not inside the room {_listed(size[:2])}")
-    blockers = list(world.floor_obstacles())
-    if world.target.position_m[2] < FLOOR_OBSTACLE_MAX_Z_M:
-        blockers.append(world.target.box())
-    for box in blockers:
+    for box in world.base_blockers():
         dx = max(box.min_m[0] - x, 0.0, x - box.max_m[0])
         dy = max(box.min_m[1] - y, 0.0, y - box.max_m[1])
         if math.hypot(dx, dy) < r - _TOL_M:

@@ -77,8 +77,7 @@ class SimBase:
         room = world.room.size_m
         self._room_xy = (room[0], room[1])
         self._blockers = np.array([[b.min_m[0], b.min_m[1], b.max_m[0], b.max_m[1]]
-                                   for b in world.obstacles if b.min_m[2] < limits.height_m]
-                                  ).reshape(-1, 4)
+                                   for b in world.base_blockers(limits.height_m)]).reshape(-1, 4)
 
     # --- the Base protocol ---------------------------------------------------------------------------
 

@@ -26,7 +26,7 @@ from onboard.config import CameraConfig
 from onboard.sim.render import StereoRenderer
 from shared.geometry import Pose2D, RigidTransform
 from shared.limits import PanTiltLimits
-from shared.world import FLOOR_OBSTACLE_MAX_Z_M, World
+from shared.world import World
 
 # The offboard navigator's DRIVE_CLEARANCE_M (offboard.experiments.world_facts); onboard cannot import it.
 DRIVE_CLEARANCE_M = 0.31
@@ -103,10 +103,7 @@ def clearance_grid(room_xy: tuple[float, float], rects: Iterable[Rect], clearanc
 
 def floor_rects(world: World) -> list[Rect]:
     """Footprints of what blocks the base: floor obstacles, and the target when it stands low."""
-    boxes = list(world.floor_obstacles())
-    if world.target.position_m[2] < FLOOR_OBSTACLE_MAX_Z_M:
-        boxes.append(world.target.box())
-    return [((b.min_m[0], b.min_m[1]), (b.max_m[0], b.max_m[1])) for b in boxes]
+    return [((b.min_m[0], b.min_m[1]), (b.max_m[0], b.max_m[1])) for b in world.base_blockers()]
 
 
 def reachable_floor(world: World, clearance_m: float = DRIVE_CLEARANCE_M) -> FloorGrid:
