@@ -80,10 +80,12 @@ def look_footprint(grid: VoxelGrid, camera_in_world: RigidTransform, intrinsics:
 
 
 def _frustum_bounds(grid: VoxelGrid, camera_in_world: RigidTransform, k: Intrinsics, far_m: float):
-    """Index bounds of the cubes inside the view pyramid out to ``far_m`` (a cube's margin around)."""
-    corners = np.array([[(u - k.cx_px) / k.fx_px, (v - k.cy_px) / k.fy_px, 1.0]
-                        for u in (-0.5, k.width_px - 0.5) for v in (-0.5, k.height_px - 0.5)])
-    corners *= far_m / np.linalg.norm(corners, axis=1, keepdims=True)
+    """Index bounds of the cubes inside the view pyramid out to ``far_m`` (a cube's margin around).
+    The pyramid is cut at depth ``far_m``, not at that distance along its edges: the edges are the
+    slanted rays, and cut there the box would end 0.78 × ``far_m`` ahead of a camera that looks
+    along a room axis, dropping the cubes the middle of the view sees beyond."""
+    corners = far_m * np.array([[(u - k.cx_px) / k.fx_px, (v - k.cy_px) / k.fy_px, 1.0]
+                                for u in (-0.5, k.width_px - 0.5) for v in (-0.5, k.height_px - 0.5)])
     points = np.vstack([camera_in_world.apply(corners), camera_in_world.translation[None]])
     top = np.array(grid.shape) - 1
     lo = np.clip(grid.index_of(points.min(axis=0) - grid.resolution_m), 0, top)

@@ -186,6 +186,18 @@ def test_footprint_is_the_visible_part_of_the_view_inside_the_detector_range():
     assert (back.detection_prob[:, 0] == 0).all() and (back.detection_prob[:, 1] > 0).mean() > 0.8
 
 
+def test_footprint_reaches_the_detector_range_straight_ahead():
+    """A camera looking along a room axis sees the middle of its view out to the detector's far
+    range, though the image's corners reach only 0.78 of it that far ahead (66° × 52° field)."""
+    hall = VoxelGrid((8.0, 3.0, 2.5), 0.1)
+    cam = MOUNT.camera_in_world(Pose2D(0.5, 1.5, 0.0), 0.0, 0.0)
+    table = DetectabilityTable.nominal(near_m=0.4, far_m=6.0)
+    depth = visible_depth(None, OccupancyGrid(hall), cam, K, 0.12, 16, 7.0)
+    fp = look_footprint(hall, cam, K, depth, 16, table, np.array([math.pi]), behind_surface_m=0.1)
+    ahead = hall.centers().reshape(-1, 3)[fp.cube_index, 0] - cam.translation[0]
+    assert ahead.max() == pytest.approx(6.0, abs=0.1)
+
+
 def test_space_seen_empty_loses_its_mass_once_whatever_the_facing():
     belief = TargetBelief(GRID, facing_sectors=4, prob_outside=0.0)
     empty = np.zeros(GRID.shape, bool)
