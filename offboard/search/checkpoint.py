@@ -9,8 +9,9 @@ crash leaves the previous checkpoint or the new one, never part of one. It holds
 - the pose tracker (estimate, covariance and the odometry-to-world offset),
 - the search's history (:class:`SearchState`: looks, taken settings, unreachable goals, positions,
   trail, planning times, motion and processing totals, estimate), the robot clock at the start, the
-  planning time not yet booked, the planner's measured processing time per look, and what each
-  dynamic prior has applied so far,
+  planning time not yet booked, the planner's measured processing time per look, the camera poses
+  of the frames searched on the way (so that none is searched twice), and what each dynamic prior
+  has applied so far,
 - the wall time so far, the search configuration, the request and the transport, so that
   ``syt-offboard search --resume DIR`` needs no other flag.
 
@@ -39,6 +40,7 @@ from offboard.search import repeat_codec
 from offboard.search.loop import Search, SearchConfig, SearchState
 from offboard.search.run import LookPrior, SearchRequest
 from offboard.search.top_view import LookTrace
+from shared.geometry import RigidTransform
 from shared.strict import StructureError, build
 from shared.transport import TransportConfig
 
@@ -143,6 +145,7 @@ def capture(search: Search) -> tuple[dict, dict[str, np.ndarray]]:
         "pending_processing_s": float(search._pending_processing_s),
         "planner_processing_s": float(search.planner.time_model.processing_s),
         "tracker": search.tracker.state(),
+        "glanced": [_plain(np.concatenate([view.rotation.ravel(), view.translation])) for view in search._glanced],
         "priors": {},
     }
     for name, prior in _look_priors(search):  # what each dynamic prior has applied so far
@@ -216,11 +219,17 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
     search._clock_start_s = float(part["clock_start_s"])
     search._pending_processing_s = float(part["pending_processing_s"])
     search.planner.set_processing_s(float(part["planner_processing_s"]))
+    search._glanced = [_view(g) for g in part.get("glanced", [])]  # none in a checkpoint from before session 48
     if search.state.widened:
         search.planner.widen()
     search.measure_driving()
     _restore_priors(search, checkpoint)
     log.info("resumed after action %d (P[F] = %.3f)", search.state.actions, search.belief.success_prob)
+
+
+def _view(plain: list[float]) -> RigidTransform:
+    """A glance's camera pose from its rotation (row by row) and translation."""
+    return RigidTransform(np.array(plain[:9], np.float64).reshape(3, 3), np.array(plain[9:], np.float64))
 
 
 def _restore_priors(search: Search, checkpoint: Checkpoint) -> None:

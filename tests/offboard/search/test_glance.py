@@ -8,24 +8,36 @@ from dataclasses import replace
 
 import pytest
 
+from conftest import saved_and_read, search_on
 from offboard.perception.stereo import StereoMatcher
+from offboard.search import checkpoint
 
 pytestmark = pytest.mark.integration
 
 
+def _glance_at(search, pan_deg: float, heading_correction_deg: float = 0.0) -> None:
+    search.robot.look(pan_deg, -25.0)
+    capture = search.robot.capture()
+    pose = search.tracker.world_pose(capture.pose.to_pose())
+    pose = replace(pose, heading_rad=pose.heading_rad + math.radians(heading_correction_deg))
+    search._glance(capture, pose, StereoMatcher(search.config.stereo).disparity(capture.left, capture.right))
+
+
 def test_a_view_is_glanced_at_once_however_a_scan_match_has_moved_the_pose_since(lab_search):
-    search, robot = lab_search, lab_search.robot
-    stereo = StereoMatcher(search.config.stereo)
+    _glance_at(lab_search, 0.0)
+    _glance_at(lab_search, 0.0, heading_correction_deg=4.0)  # the same camera, placed 4° off by a match in between
+    assert lab_search.state.glances == 1
+    _glance_at(lab_search, 10.0)  # the head turned: a new view
+    assert lab_search.state.glances == 2
 
-    def glance_at(pan_deg: float, heading_correction_deg: float = 0.0) -> None:
-        robot.look(pan_deg, -25.0)
-        capture = robot.capture()
-        pose = search.tracker.world_pose(capture.pose.to_pose())
-        pose = replace(pose, heading_rad=pose.heading_rad + math.radians(heading_correction_deg))
-        search._glance(capture, pose, stereo.disparity(capture.left, capture.right))
 
-    glance_at(0.0)
-    glance_at(0.0, heading_correction_deg=4.0)  # the same camera, placed 4° off by a match in between
-    assert search.state.glances == 1
-    glance_at(10.0)  # the head turned: a new view
-    assert search.state.glances == 2
+def test_a_resumed_search_remembers_the_views_it_glanced_at(lab_search, tmp_path):
+    """A move stopped on the way by a weak detection begins again where it stopped, its first frame
+    the same view: resumed from a checkpoint, the search must still know it has searched it."""
+    _glance_at(lab_search, 0.0)
+    resumed = search_on(lab_search.robot)
+    checkpoint.restore(resumed, saved_and_read(tmp_path, lab_search))
+    _glance_at(resumed, 0.0)
+    assert resumed.state.glances == 1
+    _glance_at(resumed, 10.0)
+    assert resumed.state.glances == 2
