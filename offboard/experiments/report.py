@@ -419,7 +419,8 @@ def prior_gains(rows: list[dict], reference: str = "uniform") -> list[PriorGain]
 
 
 def paired_times(rows: list[dict], cost: int = 3) -> list[tuple[str, int, float | None, float | None]]:
-    """Per baseline: (name, scenarios both found, SYT's mean robot minutes there, the baseline's)."""
+    """Per baseline: (name, scenarios both found, SYT's mean minutes there, the baseline's), each run's
+    minutes its ``time_min``: robot time and measured processing."""
     syt = {_scenario(r): r["time_min"] for r in rows if r["method"] == "syt" and r["cost"] == cost and r["success"]}
     out = []
     for name in dict.fromkeys(r["method"] for r in rows if r["method"] != "syt"):
@@ -599,8 +600,8 @@ def _paired_md(rows: list[dict]) -> list[str]:
     if not pairs:
         return ["No baseline runs (`--baselines`).", ""]
     lines = _margins_md(rows) + [
-             "Mean robot time to find on the scenarios (start × target × prior × seed) that both SYT with cost 3 "
-             "and the baseline solved:", "", "| Baseline | Scenarios | SYT (min) | Baseline (min) | SYT ahead |",
+             "Mean time to find (robot time and processing) on the scenarios (start × target × prior × seed) that "
+             "both SYT with cost 3 and the baseline solved:", "", "| Baseline | Scenarios | SYT (min) | Baseline (min) | SYT ahead |",
              "|---" * 5 + "|"]
     for name, n, mine, theirs in pairs:
         ahead = "—" if mine is None or theirs is None else ("yes" if mine < theirs else "no")
