@@ -4,8 +4,9 @@
 (method, cost function, prior, world, start, target, seed). A world is known by its file's name, so
 the same room given as ``fresh/room-1.toml`` in one sweep and by an absolute path in the other
 pairs; a sweep holding two worlds of one name from different folders pairs on the names as typed.
-With a fixed ``planned_processing_s`` a run repeats exactly, so a run that changed, changed because
-of what differs between the sweeps (the code or the configuration). SPL is paired as the report
+With a fixed ``planned_processing_s`` a run repeats exactly (unless it runs to the budget K, which
+counts the processing measured), so a run that changed, changed because of what differs between the
+sweeps (the code or the configuration). SPL is paired as the report
 pairs SYT with a baseline: a failure counts 0, and its standard error counts each scenario once
 (:func:`~offboard.experiments.report.paired_stderr`). Looks and distance are over the runs both
 sweeps found. The runs are also grouped by SPL's shortest path

@@ -91,7 +91,8 @@ class SearchConfig:
     # takes at least 0.7 s of it); 150 once stopped the baselines after 5 min of a 30 min budget
     max_actions: int = field(default=3000, metadata=bounds(1, 10_000))
     # 0: the planner's t(f) takes the processing measured so far (wall clock, so decisions depend on how
-    # loaded the machine is); > 0: this processing per look and none along moves, so a run repeats exactly
+    # loaded the machine is); > 0: this processing per look and none along moves, so a run repeats exactly,
+    # up to the budget: K counts the processing measured (elapsed_s), so where a run stops at K can vary
     planned_processing_s: float = field(default=0.0, metadata=bounds(0.0, 60.0))
     planning_block_m: float = field(default=0.2, metadata=bounds(0.05, 2.0))  # the planner reads the belief in blocks
     max_planning_blocks: int = field(default=16_000, metadata=bounds(100, 10_000_000))  # larger rooms: larger blocks
