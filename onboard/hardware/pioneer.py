@@ -303,23 +303,27 @@ class PioneerBase:
         self._last_write_s = time.monotonic()
 
     def _connect(self) -> tuple[serial.SerialBase, _Session]:
-        """Open the port, sync, OPEN, stop whatever the robot resumes, ENABLE, set the limits."""
+        """Open the port, STOP, sync, OPEN, stop whatever the robot resumes, ENABLE, set the limits.
+        The first STOP is for a robot whose session is still open, its status lost on the way back:
+        it hears the SYNC0s, which it takes as PULSEs, and would drive on with its last command."""
         c = self.config
         try:
             port = serial.serial_for_url(c.port, baudrate=c.baud, timeout=0.02, write_timeout=1.0)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeviceFault(f"Pioneer on {c.port}: cannot open the port: {exc}") from None
         try:
+            port.write(arcos.build_packet(Command.STOP))
+            time.sleep(c.command_gap_ms / 1000.0)
             self.identity = handshake(port, c, self._closing)
             session = _Session(arcos.dist_conv_factor(self.identity.subtype), self._continue_from)
             port.write(arcos.build_packet(Command.OPEN, 1))
             first = _wait_for(port, PacketReader(), lambda p: p.id in arcos.SIP_TYPES, c.link_timeout_ms / 1000.0)
             if first is None:
                 raise DeviceFault(f"Pioneer on {c.port}: no status packet after OPEN")
-            sip = arcos.parse_sip(first)
-            for packet in self._setup_packets():
+            for packet in self._setup_packets():  # first: OPEN may have resumed the robot's last motion
                 port.write(packet)
                 time.sleep(c.command_gap_ms / 1000.0)
+            sip = arcos.parse_sip(first)
         except (serial.SerialException, OSError, ArcosError) as exc:
             port.close()
             raise DeviceFault(f"Pioneer on {c.port}: while connecting: {exc}") from None
