@@ -399,8 +399,8 @@ class Agent:
             try:
                 stop()
             except Exception as exc:  # whatever a backend raises, the next device must still be stopped
-                log.exception("the %s did not stop", name)
                 failed.append(f"the {name} did not stop: {type(exc).__name__}: {exc}")
+                log.error("%s", failed[-1])
         return failed
 
     # --- replies -------------------------------------------------------------------------------------
