@@ -213,13 +213,14 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
         with search.occupancy.edit() as (log_odds, was_observed):
             log_odds[:], was_observed[:] = odds, observed
         search.tracker.restore(part["tracker"])
+        glanced = [_view(g) for g in part.get("glanced", [])]  # none in a checkpoint from before session 48
     except (ValueError, KeyError) as exc:
         raise CheckpointError(str(checkpoint.path), None, f"does not fit this search: {exc}") from None
     search.state = state_from_plain(part["state"])
     search._clock_start_s = float(part["clock_start_s"])
     search._pending_processing_s = float(part["pending_processing_s"])
     search.planner.set_processing_s(float(part["planner_processing_s"]))
-    search._glanced = [_view(g) for g in part.get("glanced", [])]  # none in a checkpoint from before session 48
+    search._glanced = glanced
     if search.state.widened:
         search.planner.widen()
     search.measure_driving()
