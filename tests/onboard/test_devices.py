@@ -30,7 +30,7 @@ from shared.geometry import Pose2D
 from shared.world import World
 
 # paper-lab, facing +x between the west shelf (its face 0.79 m behind) and the centre table
-START = (1.5, 2.5, 0.0)
+START = (1.5, 2.5, 0.0)  # x, y (m), heading (°)
 
 
 @dataclass
