@@ -9,7 +9,6 @@ RVEL or HEAD bytes written), ``stop_to_wire_ms`` (``stop`` called → VEL 0 writ
 
 from __future__ import annotations
 
-import dataclasses
 import statistics
 import threading
 import time
@@ -56,8 +55,8 @@ def _stopped_move(base: PioneerBase, distance_m: float, drive_s: float) -> tuple
     mover.start()
     time.sleep(drive_s)
     base.stop()
-    times = dataclasses.replace(base.wire_times)  # this stop's: the move's own follow-up stop rewrites them
     mover.join(timeout=5.0)
+    times = base.wire_times
     if not outcome or times.move_wire_s is None or times.stop_wire_s is None:
         raise RuntimeError("the benchmark's move did not reach the wire; is the base connected?")
     deadline = time.monotonic() + 3.0
