@@ -14,7 +14,7 @@ import threading
 import time
 
 from onboard.hardware import arcos
-from onboard.hardware.pioneer import PioneerBase, PioneerConfig
+from onboard.hardware.pioneer import PioneerBase, PioneerConfig, WireTimes
 from shared.geometry import Pose2D
 from shared.limits import BaseLimits
 
@@ -52,7 +52,12 @@ def _stopped_move(base: PioneerBase, distance_m: float, drive_s: float) -> tuple
     """One move stopped after ``drive_s``; (move → wire, stop → wire) in seconds."""
     outcome: list = []
     mover = threading.Thread(target=lambda: outcome.append(base.move(0.0, distance_m, 0.3, threading.Event())))
+    previous_call = base.wire_times.move_called_s
     mover.start()
+    # stop a move already on the wire: a thread slow to start could otherwise begin after the stop
+    deadline = time.monotonic() + 3.0
+    while not _on_wire(base.wire_times, previous_call) and mover.is_alive() and time.monotonic() < deadline:
+        time.sleep(0.002)
     time.sleep(drive_s)
     base.stop()
     mover.join(timeout=5.0)
@@ -63,3 +68,8 @@ def _stopped_move(base: PioneerBase, distance_m: float, drive_s: float) -> tuple
     while base.reading().moving and time.monotonic() < deadline:
         time.sleep(0.02)
     return times.move_wire_s - times.move_called_s, times.stop_wire_s - times.stop_called_s
+
+
+def _on_wire(times: WireTimes, previous_call: float | None) -> bool:
+    """Whether the move called after ``previous_call`` has written its first motion command."""
+    return times.move_called_s != previous_call and times.move_wire_s is not None

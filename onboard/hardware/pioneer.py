@@ -136,21 +136,26 @@ class PioneerBase:
                 if status == "done" and distance_m:
                     status, driven = self._drive(distance_m, speed_m_s, cancel)
             except BaseException:
-                self.stop()
+                self._halt()
                 raise
             if status != "done":  # stopped, or stalled: the last RVEL or VEL would push on (PULSE feeds the watchdog)
-                self.stop()
+                self._halt()
             # odometry can creep back a few millimetres at a stall; the distance driven is never negative
             return MotionOutcome(status, max(0.0, driven), time.monotonic() - started)
 
     def stop(self) -> None:
         """VEL 0 and RVEL 0 at once, from any thread; a running move ends as ``stopped``."""
         self.wire_times.stop_called_s, self.wire_times.stop_wire_s = time.perf_counter(), None
+        self._halt(stamped=True)
+
+    def _halt(self, stamped: bool = False) -> None:
+        """VEL 0 and RVEL 0; ``stamped`` (a caller's stop, not a move's own) times the VEL 0 for the benchmark."""
         with self._write_lock:
             self._halted = True
             try:
                 self._write_locked(arcos.build_packet(Command.VEL, 0))
-                self.wire_times.stop_wire_s = time.perf_counter()
+                if stamped:
+                    self.wire_times.stop_wire_s = time.perf_counter()
                 self._write_locked(arcos.build_packet(Command.RVEL, 0))
             except (DeviceFault, serial.SerialException, OSError) as exc:
                 log.warning("Pioneer: stop not sent (%s); the robot's watchdog halts it within 2 s", exc)

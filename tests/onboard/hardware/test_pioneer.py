@@ -98,11 +98,16 @@ def test_stop_while_moving(driver, sim_base, emulator):
     with ThreadPoolExecutor(1) as pool:
         running = pool.submit(driver.move, 0.0, 2.0, 0.5, threading.Event())
         assert wait_until(lambda: driver.reading().speed_m_s > 0.2, 3.0)
+        called_s = time.perf_counter()
         driver.stop()
+        returned_s = time.perf_counter()
         outcome = running.result(timeout=2.0)
     assert outcome.status == "stopped" and 0.05 < outcome.distance_m < 1.0
+    # the stamps are this stop's, not those of the stop the ending move sends after it (the benchmark reads them)
+    times = driver.wire_times
+    assert called_s <= times.stop_called_s <= times.stop_wire_s <= returned_s
     # at once (the benchmark measures the median against its 20 ms target; a loaded machine gets slack here)
-    assert driver.wire_times.stop_wire_s - driver.wire_times.stop_called_s < 0.05
+    assert times.stop_wire_s - times.stop_called_s < 0.05
     assert wait_until(lambda: not driver.reading().moving, 2.0)
     motion = [c for c in emulator.history() if c[0] in (Command.VEL, Command.RVEL, Command.HEAD)]
     assert motion[-2:] == [(Command.VEL, 0), (Command.RVEL, 0)]  # nothing of the move after the stop
