@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from onboard.devices import BaseReading
+from onboard.emulators.cable import Cable
 from onboard.emulators.pty import PseudoTerminal
 from onboard.emulators.tcp import TcpPort
 from onboard.hardware import arcos
@@ -312,8 +313,7 @@ class PioneerEmulator:
         self._terminal = terminal or PseudoTerminal()
         self._reader = arcos.PacketReader()
         self._stop = threading.Event()
-        self._hears, self._talks = threading.Event(), threading.Event()  # the cable's two lines
-        self.plug()
+        self.cable = Cable()
         self._lock = threading.Lock()  # the state is read by tests while the thread runs it
         self._thread = threading.Thread(target=self._serve, name="pioneer-emulator", daemon=True)
 
@@ -326,17 +326,6 @@ class PioneerEmulator:
         self._thread.start()
         log.info("Pioneer emulator (%s) on %s", self.state.config.subtype, self.path)
         return self
-
-    def unplug(self, still_hears: bool = False) -> None:
-        """Cut the cable: bytes both ways are lost; the robot runs on (its watchdog will halt it).
-        ``still_hears``: only the robot's transmit line fails, so it still hears the host."""
-        self._talks.clear()
-        if not still_hears:
-            self._hears.clear()
-
-    def plug(self) -> None:
-        self._hears.set()
-        self._talks.set()
 
     def snapshot(self) -> tuple[bool, bool, float, float]:
         """(session open, watchdog tripped, speed mm/s, turn rate deg/s), for tests."""
@@ -367,10 +356,10 @@ class PioneerEmulator:
             replies: list[bytes] = []
             with self._lock:
                 now = time.monotonic()
-                if data and self._hears.is_set():
+                if data and self.cable.hears:
                     for packet in self._reader.feed(data):
                         replies += self.state.receive(packet, now)
                 replies += self.state.step(now)
-            if self._talks.is_set():
+            if self.cable.talks:
                 for reply in replies:
                     self._terminal.write(reply)

@@ -22,6 +22,7 @@ import time
 from dataclasses import dataclass
 
 from onboard.devices import PanTiltReading
+from onboard.emulators.cable import Cable
 from onboard.emulators.pty import PseudoTerminal
 from onboard.hardware.ptu_protocol import (BARE_COMMANDS, TYPICAL_RESOLUTION_ARCSEC, VALUED_COMMANDS,
                                            deg_to_positions, positions_to_rad)
@@ -279,8 +280,7 @@ class PtuEmulator:
         self._pty = PseudoTerminal()
         self.device_path = self._pty.path
         self._stop = threading.Event()
-        self._plugged = threading.Event()
-        self._plugged.set()
+        self.cable = Cable()
         self._thread = threading.Thread(target=self._serve, name="ptu-emulator", daemon=True)
 
     def __enter__(self) -> PtuEmulator:
@@ -306,13 +306,6 @@ class PtuEmulator:
         with self._lock:
             self._pty.write(data)
 
-    def unplug(self) -> None:
-        """Cut the cable: the unit hears nothing and says nothing; the head finishes its slew."""
-        self._plugged.clear()
-
-    def plug(self) -> None:
-        self._plugged.set()
-
     def close(self) -> None:
         self._stop.set()
         if self._thread.is_alive():
@@ -329,7 +322,7 @@ class PtuEmulator:
                 time.sleep(self._tick_s)
             with self._lock:
                 now = time.monotonic()
-                heard = data if self._plugged.is_set() else b""
+                heard = data if self.cable.hears else b""
                 said = self.machine.receive(heard, now) if heard else self.machine.advance(now)
-                if self._plugged.is_set():
+                if self.cable.talks:
                     self._pty.write(said)

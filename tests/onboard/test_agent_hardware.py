@@ -81,13 +81,13 @@ def test_a_dropped_serial_link_is_a_device_error_then_the_agent_serves_again():
         session.declare_subscriber(KEYS.odometry, lambda _: published.append(time.monotonic()))
         assert wait_until(lambda: isinstance(_state(session), m.StateReply), 10.0)
 
-        emulated.pioneer.unplug()
+        emulated.pioneer.cable.unplug()
         assert wait_until(lambda: _state(session) == "device", 3.0)
         move = m.MoveCommand(next(_ids), distance_m=0.5)
         assert _ask(session, KEYS.move, move, m.MoveResult) == "device"
         quiet_since = time.monotonic()
 
-        emulated.pioneer.plug()
+        emulated.pioneer.cable.plug()
         assert wait_until(lambda: isinstance(_state(session), m.StateReply), 5.0)
         assert wait_until(lambda: any(t > quiet_since for t in published), 2.0)  # publishing resumed
         moved = _ask(session, KEYS.move, m.MoveCommand(next(_ids), distance_m=0.2), m.MoveResult)
@@ -102,7 +102,7 @@ def test_a_pan_tilt_that_cannot_halt_leaves_the_watchdog_and_the_commands_alive(
     stop is answered with the device that did not stop."""
     with _hardware_agent(watchdog_ms=800) as (emulated, session):
         assert wait_until(lambda: isinstance(_state(session), m.StateReply), 10.0)
-        emulated.ptu.unplug()
+        emulated.ptu.cable.unplug()
         for _ in range(2):  # nobody speaks after the move: the watchdog stops it after 0.8 s
             moved = _ask(session, KEYS.move, m.MoveCommand(next(_ids), distance_m=1.5, speed_m_s=0.3), m.MoveResult)
             assert moved.status == "stopped" and moved.distance_m < 0.6

@@ -75,7 +75,7 @@ def test_probe_names_the_robot(emulator):
 
 
 def test_probe_of_a_silent_port_is_a_device_fault(emulator):
-    emulator.unplug()
+    emulator.cable.unplug()
     with pytest.raises(DeviceFault, match="no ARCOS robot answered"):
         probe(emulator.path, timeout_ms=100)
 
@@ -186,7 +186,7 @@ def test_link_drop_faults_refuses_motion_and_reconnects(driver, emulator):
     with ThreadPoolExecutor(1) as pool:
         running = pool.submit(driver.move, 0.0, 3.0, 0.3, threading.Event())
         assert wait_until(lambda: driver.reading().speed_m_s > 0.2, 3.0)
-        emulator.unplug()
+        emulator.cable.unplug()
         with pytest.raises(DeviceFault, match="link down|no status"):
             running.result(timeout=2.0)
     with pytest.raises(DeviceFault, match="reconnecting"):
@@ -197,7 +197,7 @@ def test_link_drop_faults_refuses_motion_and_reconnects(driver, emulator):
     assert wait_until(lambda: emulator.snapshot()[1], 3.0)
     assert wait_until(lambda: emulator.snapshot()[2] == 0.0, 2.0)
     last = driver._continue_from
-    emulator.plug()  # the old session is still open: the driver closes it and starts again
+    emulator.cable.plug()  # the old session is still open: the driver closes it and starts again
     assert wait_until(lambda: _answers(driver), 5.0)
     pose = driver.reading().pose
     assert pose.x_m == pytest.approx(last.x_m, abs=0.01)  # odometry carries on across sessions
@@ -213,7 +213,7 @@ def test_a_robot_gone_silent_but_still_listening_is_told_to_stop(driver, emulato
     with ThreadPoolExecutor(1) as pool:
         running = pool.submit(driver.move, 0.0, 3.0, 0.3, threading.Event())
         assert wait_until(lambda: driver.reading().speed_m_s > 0.2, 3.0)
-        emulator.unplug(still_hears=True)
+        emulator.cable.unplug(still_hears=True)
         with pytest.raises(DeviceFault, match="link down|no status"):
             running.result(timeout=2.0)
     assert wait_until(lambda: emulator.snapshot()[2] == 0.0, 1.5)  # before the watchdog's 2 s could
