@@ -72,11 +72,18 @@ def _encode_array(array: np.ndarray, encoding: ArrayEncoding) -> dict[str, Any]:
     return {"dtype": str(array.dtype), "shape": list(array.shape), "encoding": encoding, "data": data}
 
 
+def _png_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) from a PNG's IHDR chunk; None if ``data`` does not start like a PNG."""
+    if len(data) < 24 or data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
+        return None
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
 def _decode_array(value: Any, where: str) -> np.ndarray:
     if not isinstance(value, dict) or set(value) != {"dtype", "shape", "encoding", "data"}:
         raise ProtocolError(where, value, "expected an array header with dtype, shape, encoding, data")
     dtype, shape, encoding, data = value["dtype"], value["shape"], value["encoding"], value["data"]
-    if dtype not in _DTYPES:
+    if not isinstance(dtype, str) or dtype not in _DTYPES:  # a list or map is unhashable: check the type first
         raise ProtocolError(f"{where}.dtype", dtype, f"must be one of {sorted(_DTYPES)}")
     if (not isinstance(shape, list) or not 1 <= len(shape) <= 4
             or not all(isinstance(n, int) and not isinstance(n, bool) and 0 <= n <= 100_000 for n in shape)):
@@ -89,6 +96,9 @@ def _decode_array(value: Any, where: str) -> np.ndarray:
             raise ProtocolError(f"{where}.data", f"{len(data)} bytes", f"shape {shape} of {dtype} needs {expected} bytes")
         return np.frombuffer(data, dtype=dtype).reshape(shape)
     if encoding == "png":
+        if _png_size(data) not in (None, (shape[1] if len(shape) > 1 else None, shape[0])):
+            # before decoding: a small PNG that declares a huge image would make imdecode allocate it
+            raise ProtocolError(f"{where}.data", f"PNG of {_png_size(data)} (width, height)", f"must match shape {shape}")
         try:
             array = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
         except cv2.error:  # raised for some garbage (an empty buffer) instead of returning None

@@ -2,6 +2,7 @@
 
 import math
 
+import cv2
 import msgpack
 import numpy as np
 import pytest
@@ -111,7 +112,7 @@ def _capture_body(**left_changes) -> bytes:
 
 
 @pytest.mark.parametrize("change", [
-    {"data": b"short"}, {"dtype": "complex128"}, {"shape": [6, -8, 3]}, {"encoding": "jpeg"},
+    {"data": b"short"}, {"dtype": "complex128"}, {"dtype": []}, {"dtype": {"a": 1}}, {"shape": [6, -8, 3]}, {"encoding": "jpeg"},
     {"encoding": "png"},  # raw bytes labelled as PNG
     {"shape": [6, 8, 4], "data": bytes(6 * 8 * 4)},  # not RGB: refused by the message's own check
 ])
@@ -144,3 +145,12 @@ def test_random_bytes_never_escape_as_anything_but_protocol_error(data):
 def test_look_commands_round_trip(pan, tilt, cid):
     cmd = m.LookCommand(cid, pan, tilt)
     assert decode(encode(cmd), m.LookCommand) == cmd
+
+
+def test_a_png_whose_header_disagrees_with_the_shape_is_refused_before_it_is_decoded(monkeypatch):
+    big = cv2.imencode(".png", np.zeros((2000, 3000, 3), np.uint8))[1].tobytes()  # a few kB, 18 MB decoded
+    decoded = []
+    monkeypatch.setattr(cv2, "imdecode", lambda *a: decoded.append(a))  # a spy: a bomb must not reach it
+    with pytest.raises(ProtocolError, match=r"PNG of \(3000, 2000\)") as err:
+        decode(_capture_body(encoding="png", data=big), m.Capture)
+    assert err.value.field == "left.data" and not decoded
