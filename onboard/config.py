@@ -68,7 +68,7 @@ class OdometryNoise:
 class SimConfig:
     world: str = "paper-lab"  # a bundled world name or a world file path
     realtime: bool = False  # pace the simulated clock like the real robot
-    seed: int = 0  # odometry noise
+    seed: int = field(default=0, metadata=bounds(0, 2**63 - 1))  # odometry noise (numpy takes no negative seed)
     step_s: float = field(default=0.02, metadata=bounds(1e-3, 0.5))  # physics step of robot time
     odometry_noise: OdometryNoise = OdometryNoise()
 
