@@ -26,12 +26,12 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-_ROBOT_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+_ROBOT_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 
 def check_robot_id(robot_id: str) -> str:
     """Robot (and planner) ids become one key chunk: no slashes or wildcards."""
-    if not _ROBOT_ID.match(robot_id):
+    if not _ROBOT_ID.fullmatch(robot_id):  # match with "$" lets a trailing newline through
         raise ValueError(f"id {robot_id!r} must be 1-64 letters, digits, '_' or '-'")
     return robot_id
 
