@@ -27,6 +27,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["RobotClient", "CommandError", "RobotUnavailable"]
 
+_LONGEST_MOTION_S = 3600.0
+
 
 class RobotClient:
     def __init__(self, session: zenoh.Session, robot_id: str, heartbeat_hz: float = 5.0):
@@ -78,18 +80,19 @@ class RobotClient:
     def move(self, turn_deg: float = 0.0, distance_m: float = 0.0, speed_m_s: float | None = None) -> m.MoveResult:
         """Turn in place by ``turn_deg`` (counter-clockwise), then drive ``distance_m``."""
         cmd = m.MoveCommand(self._next_id(), turn_deg=turn_deg, distance_m=distance_m, speed_m_s=speed_m_s)
-        return self._request(self.keys.move, cmd, m.MoveResult, self._motion_timeout_s(turn_deg, distance_m))
+        return self._request(self.keys.move, cmd, m.MoveResult, self._motion_timeout_s(turn_deg, distance_m, speed_m_s))
 
     def move_to(self, x_m: float, y_m: float, speed_m_s: float | None = None) -> m.MoveResult:
         """Turn towards the world point (as the robot's odometry sees it) and drive to it."""
         cmd = m.MoveCommand(self._next_id(), waypoint_m=(x_m, y_m), speed_m_s=speed_m_s)
-        return self._request(self.keys.move, cmd, m.MoveResult, self._motion_timeout_s(180.0, 30.0))
+        return self._request(self.keys.move, cmd, m.MoveResult, self._motion_timeout_s(180.0, 30.0, speed_m_s))
 
     def stop(self) -> m.StopResult:
         return self._request(self.keys.stop, m.StopCommand(self._next_id()), m.StopResult, 5.0)
 
     def look(self, pan_deg: float, tilt_deg: float) -> m.LookResult:
-        return self._request(self.keys.look, m.LookCommand(self._next_id(), pan_deg, tilt_deg), m.LookResult, 30.0)
+        return self._request(self.keys.look, m.LookCommand(self._next_id(), pan_deg, tilt_deg), m.LookResult,
+                             self._look_timeout_s())
 
     def capture(self, encoding: str = "raw") -> m.Capture:
         return self._request(self.keys.capture, m.CaptureCommand(self._next_id(), encoding), m.Capture, 30.0)
@@ -121,11 +124,19 @@ class RobotClient:
     def _request(self, key: str, command: object, expected: type, timeout_s: float):
         return request(self.session, key, command, expected, timeout_s)
 
-    def _motion_timeout_s(self, turn_deg: float, distance_m: float) -> float:
-        """Generous: the robot's own time for the motion (when paced in real time) and a margin."""
+    def _motion_timeout_s(self, turn_deg: float, distance_m: float, speed_m_s: float | None) -> float:
+        """Generous: the robot's own time for the motion at the speed asked (when paced in real time) and a
+        margin; at most an hour, so that an absurd distance reaches the robot and is refused there by name."""
         info = self._info or self.info()
-        expected = info.base.turn_time_s(math.radians(turn_deg)) + info.base.drive_time_s(distance_m)
-        return 2.0 * expected + 10.0
+        expected = (info.base.turn_time_s(math.radians(turn_deg))
+                    + info.base.drive_time_s(distance_m, speed_m_s))
+        return min(_LONGEST_MOTION_S, 2.0 * expected + 10.0)  # in this order, NaN gives the hour too
+
+    def _look_timeout_s(self) -> float:
+        """The head's slowest slew, corner to corner at the unit's own speeds, twice, and the capture's margin."""
+        head = (self._info or self.info()).pantilt
+        slowest = head.slew_time_s(head.pan_max_deg - head.pan_min_deg, head.tilt_max_deg - head.tilt_min_deg)
+        return 2.0 * slowest + 30.0
 
     def _beat(self, period_s: float) -> None:
         for seq in itertools.count():
