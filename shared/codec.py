@@ -96,9 +96,9 @@ def _decode_array(value: Any, where: str) -> np.ndarray:
             raise ProtocolError(f"{where}.data", f"{len(data)} bytes", f"shape {shape} of {dtype} needs {expected} bytes")
         return np.frombuffer(data, dtype=dtype).reshape(shape)
     if encoding == "png":
-        if _png_size(data) not in (None, (shape[1] if len(shape) > 1 else None, shape[0])):
-            # before decoding: a small PNG that declares a huge image would make imdecode allocate it
-            raise ProtocolError(f"{where}.data", f"PNG of {_png_size(data)} (width, height)", f"must match shape {shape}")
+        size = _png_size(data)  # checked before decoding: a small PNG declaring a huge image would be allocated
+        if size is not None and size != (shape[1] if len(shape) > 1 else 1, shape[0]):
+            raise ProtocolError(f"{where}.data", f"PNG of {size} (width, height)", f"must match shape {shape}")
         try:
             array = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
         except cv2.error:  # raised for some garbage (an empty buffer) instead of returning None
