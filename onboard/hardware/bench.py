@@ -12,6 +12,7 @@ from __future__ import annotations
 import statistics
 import threading
 import time
+from collections.abc import Callable
 
 from onboard.hardware import arcos
 from onboard.hardware.pioneer import PioneerBase, PioneerConfig, WireTimes
@@ -55,21 +56,24 @@ def _stopped_move(base: PioneerBase, distance_m: float, drive_s: float) -> tuple
     previous_call = base.wire_times.move_called_s
     mover.start()
     # stop a move already on the wire: a thread slow to start could otherwise begin after the stop
-    deadline = time.monotonic() + 3.0
-    while not _on_wire(base.wire_times, previous_call) and mover.is_alive() and time.monotonic() < deadline:
-        time.sleep(0.002)
+    _wait(lambda: _on_wire(base.wire_times, previous_call) or not mover.is_alive(), 3.0, 0.002)
     time.sleep(drive_s)
     base.stop()
     mover.join(timeout=5.0)
     times = base.wire_times
     if not outcome or times.move_wire_s is None or times.stop_wire_s is None:
         raise RuntimeError("the benchmark's move did not reach the wire; is the base connected?")
-    deadline = time.monotonic() + 3.0
-    while base.reading().moving and time.monotonic() < deadline:
-        time.sleep(0.02)
+    _wait(lambda: not base.reading().moving, 3.0, 0.02)
     return times.move_wire_s - times.move_called_s, times.stop_wire_s - times.stop_called_s
 
 
 def _on_wire(times: WireTimes, previous_call: float | None) -> bool:
     """Whether the move called after ``previous_call`` has written its first motion command."""
     return times.move_called_s != previous_call and times.move_wire_s is not None
+
+
+def _wait(done: Callable[[], bool], timeout_s: float, poll_s: float) -> None:
+    """Poll ``done`` until it holds or ``timeout_s`` has passed; the caller judges what it finds."""
+    deadline = time.monotonic() + timeout_s
+    while not done() and time.monotonic() < deadline:
+        time.sleep(poll_s)
