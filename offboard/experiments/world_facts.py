@@ -212,8 +212,9 @@ def viewpoint(truth: Truth, start_xy: tuple[float, float], criteria: SeeingCrite
               margin_m: float = 0.0, avoid: tuple[tuple[float, float], ...] = (),
               avoid_m: float = 0.0) -> tuple[tuple[float, float] | None, float]:
     """The seeing position closest to ``start_xy`` along collision-free paths, and that path's length
-    (``None, inf`` if none is reachable). With ``margin_m``, only positions whose every free
-    neighbour within that distance sees the target too: a robot that stops a little off still sees it.
+    (``None, inf`` if none is reachable; ``start_xy, 0`` if the start's own cell sees it). With
+    ``margin_m``, only positions whose every free neighbour within that distance sees the target too:
+    a robot that stops a little off still sees it.
     Positions within ``avoid_m`` of a point of ``avoid`` (viewpoints already tried) do not count."""
     floor = true_floor_map(truth, criteria)
     seen = seeing_cells(truth, floor, criteria)
@@ -231,6 +232,9 @@ def viewpoint(truth: Truth, start_xy: tuple[float, float], criteria: SeeingCrite
     best = np.unravel_index(int(np.argmin(cost)), cost.shape)
     if not math.isfinite(cost[best]):
         return None, math.inf
+    if seen[grid_planner.cell_of(floor, start_xy)]:
+        # the start's own cell sees it: the robot needs no drive at all (not the few mm to the cell's centre)
+        return start_xy, 0.0
     return grid_planner.cell_center(floor, (int(best[0]), int(best[1]))), float(cost[best])
 
 

@@ -21,7 +21,7 @@ SUMMARY = {"found": True, "status": "found", "actions": 6, "positions_visited": 
            "prob_outside": 0.0, "prob_inside": 1.0, "success_prob": 0.9, "cost_function": 3, "detector": "sift",
            "decisions": 6, "prior": "uniform"}
 TARGETS = {"paper-lab": (1.7, 4.65, 0.75, -90.0), "office": (4.3, 2.6, 0.74, -90.0)}
-STARTS = {"paper-lab": (4.5, 0.6, 90.0), "office": (5.5, 1.0, 135.0)}
+STARTS = {"paper-lab": (4.5, 0.6, 90.0), "office": (2.625, 3.125, 0.0)}
 
 
 def _look(expected: float, realised: float, detected: bool = False) -> dict:

@@ -78,6 +78,14 @@ def test_the_oracles_viewpoint_for_a_high_shelf_target_is_far_enough_back_and_se
         assert _sees(HIGH, off, config.oracle_view), off
 
 
+def test_a_target_seen_from_the_start_needs_no_drive():
+    start = (3.01, 2.81)  # off its 5 cm cell's centre, in a cell that sees the shelf's picture
+    assert _sees(HIGH, start)
+    assert viewpoint(HIGH, start) == (start, 0.0)  # not the few mm to the cell's centre
+    _, shortest = viewpoint(HIGH, (3.0, 0.5))
+    assert 0 < shortest < math.inf
+
+
 def test_a_picture_half_hidden_is_not_seen():
     # a cabinet as tall as the target hides the left half of its picture from straight ahead
     truth = Truth((6.0, 5.0, 2.5), (Obstacle((2.0, 3.0, 0.0), (3.0, 3.2, 1.5)),), (3.0, 4.0, 1.2), -90.0)
