@@ -10,7 +10,8 @@ for the run (``sim/reset``: the run's start, target placement and noise seed, so
 numbers whichever worker runs it, in whatever order) and runs :func:`offboard.search.run.run_search`
 with a fresh planner; a run that fails gets the worker a fresh agent. Every finished run appends a
 row to ``results.csv`` at once, so an interrupted sweep resumes where it stopped (rows are keyed by
-the run; failed runs are tried again). Logs: ``runs/<run>/search.log`` per run,
+the run; failed runs are tried again; ``sweep.json`` holds the settings they ran with, and a sweep with
+other settings is refused that folder). Logs: ``runs/<run>/search.log`` per run,
 ``workers/worker-<k>/{worker,onboard}.log`` per worker.
 
 The harness is the experimenter: it reads the world file (:mod:`offboard.experiments.world_facts`; offboard
@@ -250,8 +251,8 @@ class SweepSettings:
     jobs: int = field(default_factory=lambda: os.cpu_count() or 1)
     budget_s: float | None = None  # K for every run; None: the configuration's (1800 s by default)
     run_timeout_s: float = 3600.0  # wall clock, per run
-    move_threshold: float | None = None  # Θ_move for every SYT run (a sweep of its own: use its own --out)
-    config_path: Path | None = None  # SearchConfig TOML for every run (likewise)
+    move_threshold: float | None = None  # Θ_move for every SYT run
+    config_path: Path | None = None  # SearchConfig TOML for every run
 
 
 @dataclass
@@ -419,9 +420,44 @@ def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Worker
     return make_row(run, world, None, wall, answer.removeprefix("error: "))
 
 
+SETTINGS_FILE = "sweep.json"  # in --out: the settings its rows ran with, beside results.csv
+
+
+def run_settings(settings: SweepSettings) -> dict:
+    """What a run's numbers depend on besides its row's key: the search configuration as loaded (the
+    same values from two files are the same settings), Θ_move and K."""
+    config = load_config(SearchConfig, settings.config_path)
+    return json.loads(json.dumps({"search": asdict(config), "move_threshold": settings.move_threshold,
+                                  "budget_s": settings.budget_s}, default=str))
+
+
+def _flat(tree: dict, prefix: str = "") -> dict[str, object]:
+    out = {}
+    for name, value in tree.items():
+        out.update(_flat(value, f"{prefix}{name}.") if isinstance(value, dict) else {prefix + name: value})
+    return out
+
+
+def _check_settings(settings: SweepSettings) -> None:
+    """Record the sweep's settings in ``--out``, or refuse (:class:`SweepRefused`) to resume a folder
+    whose rows ran with others: their figures would be mixed in one report, silently."""
+    path, now = settings.out / SETTINGS_FILE, run_settings(settings)
+    if path.is_file():
+        before, after = _flat(json.loads(path.read_text())), _flat(now)
+        differ = [f"{k} {before.get(k)!r} there, {after.get(k)!r} now" for k in sorted(before.keys() | after.keys())
+                  if before.get(k) != after.get(k)]
+        if differ:
+            raise SweepRefused(f"{settings.out} holds runs with other settings ({'; '.join(differ)}): "
+                               "use another --out")
+    elif (settings.out / "results.csv").is_file():
+        log.warning("%s has no %s: its runs are taken to have these settings", settings.out, SETTINGS_FILE)
+    path.write_text(json.dumps(now, indent=2) + "\n")
+
+
 def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progress], None] | None = None) -> Progress:
     """Run what ``results.csv`` does not hold yet; each row is appended as its run finishes."""
     settings.out.mkdir(parents=True, exist_ok=True)
+    _check_settings(settings)
     results = settings.out / "results.csv"
     done = finished_keys(results)
     todo = [r for r in runs if r.key not in done]
@@ -496,9 +532,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="robot-time budget K (default: the --config file's, 1800)")
     parser.add_argument("--move-threshold", type=probability("--move-threshold"), metavar="P",
                         help="Θ_move for the SYT runs, which then move by the report's threshold rule "
-                             "(default: the rate rule); give each value its own --out")
+                             "(default: the rate rule); a folder swept with another is refused")
     parser.add_argument("--config", type=Path, metavar="FILE.toml",
-                        help="search configuration (SearchConfig) for every run; give it its own --out")
+                        help="search configuration (SearchConfig) for every run; a folder swept with another is refused")
     parser.add_argument("--limit", type=int, metavar="N", help="only the first N runs of the grid")
     parser.add_argument("--run-timeout-s", type=float, default=3600.0, metavar="SECONDS", help="wall clock per run")
     parser.add_argument("--report-only", action="store_true", help="rewrite report.md and the plots from results.csv")

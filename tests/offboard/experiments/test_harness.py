@@ -122,6 +122,30 @@ def test_an_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path, mo
     assert {r["key"] for r in load_results(results)} == {r.key for r in runs}
 
 
+
+def test_a_sweep_does_not_resume_into_a_folder_swept_with_other_settings(tmp_path, monkeypatch, caplog):
+    world = load_facts("paper-lab")
+    runs = build_runs(PAPER)[:2]
+    monkeypatch.setattr(experiment, "_prepare", lambda todo, out: {})
+    monkeypatch.setattr(experiment, "_execute", lambda run, *_: make_row(run, world, SUMMARY, 1.0))
+    fixed = tmp_path / "fixed.toml"
+    fixed.write_text("planned_processing_s = 0.45\n")
+    out = tmp_path / "out"
+    experiment.sweep(runs[:1], experiment.SweepSettings(out, jobs=1, config_path=fixed))
+    before = (out / "results.csv").read_text()
+    for other in (experiment.SweepSettings(out, jobs=1),  # the measured processing time, not 0.45 s
+                  experiment.SweepSettings(out, jobs=1, config_path=fixed, budget_s=600.0)):
+        with pytest.raises(experiment.SweepRefused, match="use another --out") as refused:
+            experiment.sweep(runs, other)
+        assert ("search.planned_processing_s 0.45 there, 0.0 now" if other.config_path is None
+                else "budget_s None there, 600.0 now") in str(refused.value)
+    assert (out / "results.csv").read_text() == before
+    same = tmp_path / "same.toml"  # the same values from another file: the same settings
+    same.write_text("planned_processing_s = 0.45\n[planner]\nleave_margin = 3.0\n")
+    assert experiment.sweep(runs, experiment.SweepSettings(out, jobs=1, config_path=same)).done == 1
+    assert experiment.main(_args("--limit", "1", "--jobs", "1", "--out", str(out))) == 2
+    assert any("holds runs with other settings" in r.getMessage() for r in caplog.records if r.levelname == "ERROR")
+
 SMALL_ROOM = """
 name = "{name}"
 [room]
