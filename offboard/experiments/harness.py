@@ -459,7 +459,10 @@ def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progr
     settings.out.mkdir(parents=True, exist_ok=True)
     _check_settings(settings)
     results = settings.out / "results.csv"
-    done = finished_keys(results)
+    try:
+        done = finished_keys(results)
+    except ValueError as exc:  # not this harness's results.csv: its rows are kept, no run is added
+        raise SweepRefused(str(exc)) from None
     todo = [r for r in runs if r.key not in done]
     progress = Progress(total=len(runs), skipped=len(runs) - len(todo))
     prepared = _prepare(todo, settings.out)

@@ -18,6 +18,7 @@ realised P (:mod:`offboard.experiments.calibration`).
 from __future__ import annotations
 
 import csv
+import logging
 import math
 import os
 import statistics
@@ -31,6 +32,8 @@ from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, cal
                                               coverage_md, localisation_md, read_looks)
 from offboard.experiments.failures import failures_md, last_true_look
 from offboard.experiments.target_views import target_views, target_views_md, viewed_runs
+
+log = logging.getLogger(__name__)
 
 COSTS = (1, 2, 3, 4)
 PRIORS = {"uniform": "No knowledge", "tables": "Knowledge"}
@@ -66,15 +69,33 @@ TEXT_COLUMNS = ("method", "world", "start", "target", "prior", "status", "key", 
                 "target_estimate_m", "run_dir")
 
 
+TORN_SUFFIX = ".torn"  # results.csv.torn: the unfinished last row of a sweep killed while writing it
+
+
 def finished_keys(results: Path) -> set[str]:
-    """Runs already done (a row whose status is not an error)."""
+    """Runs already done (a row whose status is not an error). A last row cut short by a kill is
+    moved to ``results.csv.torn`` first, so that its run is done again."""
     if not results.is_file():
         return set()
+    _set_torn_row_aside(results)
     with results.open(newline="") as f:
-        reader = csv.DictReader(f)
-        if tuple(reader.fieldnames or ()) != COLUMNS:
+        if tuple(next(csv.reader(f), ())) != COLUMNS:
             raise ValueError(f"{results} has other columns than this harness writes: use another --out")
-        return {row["key"] for row in reader if not row["status"].startswith("error")}
+    return {row["key"] for row in load_results(results, latest=False) if not row["status"].startswith("error")}
+
+
+def _set_torn_row_aside(results: Path) -> None:
+    data = results.read_bytes()
+    if not data or data.endswith(b"\n"):
+        return
+    head, _, torn = data.rpartition(b"\n")
+    aside = results.with_name(results.name + TORN_SUFFIX)
+    with aside.open("ab") as f:
+        f.write(torn + b"\n")
+    with results.open("r+b") as f:
+        f.truncate(len(head) + 1 if head else 0)
+    log.warning("%s: its last row was cut short (%d bytes); moved to %s, and its run will be done again",
+                results, len(torn), aside)
 
 
 def append_row(results: Path, row: dict) -> None:
@@ -97,16 +118,36 @@ def _number(text: str) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def load_results(path: Path) -> list[dict]:
-    """One row per run (the last attempt of each), with numbers and booleans parsed."""
+# the columns every results.csv has had; those added later are empty in an older file
+REQUIRED_COLUMNS = RUN_COLUMNS + SUMMARY_COLUMNS + DERIVED_COLUMNS
+
+
+def load_results(path: Path, latest: bool = True) -> list[dict]:
+    """One row per run (the last attempt of each; every attempt if not ``latest``), with numbers and
+    booleans parsed. A ValueError names the file, and the line, of a row that is not one this harness
+    writes."""
     with Path(path).open(newline="") as f:
-        latest = {row["key"]: row for row in csv.DictReader(f)}
-    rows = []
-    for row in latest.values():
-        parsed = {k: v if k in TEXT_COLUMNS else _number(v) for k, v in row.items()}
-        parsed.update(found=row["found"] == "True", success=row["success"] == "True", cost=_number(row["cost"]))
-        rows.append({**parsed, **_times(parsed)})
-    return rows
+        reader = csv.DictReader(f)
+        missing = [c for c in REQUIRED_COLUMNS if c not in (reader.fieldnames or ())]
+        if missing:
+            raise ValueError(f"{path}: not an experiment's results.csv: no column {', '.join(missing)}")
+        rows = [_parsed(row, f"{path}:{reader.line_num}") for row in reader]
+    return list({r["key"]: r for r in rows}.values()) if latest else rows
+
+
+def _parsed(row: dict, where: str) -> dict:
+    header = len(row) - (None in row)
+    if None in row or None in row.values():  # csv's marks for more fields than the header, and fewer
+        fields = header + len(row.get(None, ())) - sum(v is None for v in row.values())
+        raise ValueError(f"{where}: {fields} fields where the header has {header}")
+    allowed = tuple(map(str, COSTS)) if row["method"] == "syt" else ("",)  # the cost function is SYT's
+    if row["cost"] not in allowed:
+        raise ValueError(f"{where}: cost {row['cost']!r} for method {row['method']!r}, not one of {allowed}")
+    parsed = {**dict.fromkeys(TIME_COLUMNS + GLANCE_COLUMNS),
+              **{k: v if k in TEXT_COLUMNS else _number(v) for k, v in row.items()}}
+    parsed.update(found=row["found"] == "True", success=row["success"] == "True",
+                  cost=int(row["cost"]) if row["cost"] else None)
+    return {**parsed, **_times(parsed)}
 
 
 def _times(row: dict) -> dict:

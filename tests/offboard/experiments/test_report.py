@@ -3,17 +3,20 @@ expected against realised P from each run's looks.jsonl."""
 
 from __future__ import annotations
 
+import argparse
+import csv
 import json
 import statistics
 from pathlib import Path
 
 import pytest
 
+from offboard.experiments import harness
 from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, coverage, coverage_md, parse_look,
                                               read_looks)
 from offboard.experiments.harness import Run, make_row
-from offboard.experiments.report import (COLUMNS, append_row, distance_group, load_results, prior_gains, scope,
-                                         spl_margins, write_report)
+from offboard.experiments.report import (COLUMNS, REQUIRED_COLUMNS, append_row, distance_group, finished_keys,
+                                         load_results, prior_gains, scope, spl_margins, write_report)
 from offboard.experiments.world_facts import load_facts
 
 SUMMARY = {"found": True, "status": "found", "actions": 6, "positions_visited": 2, "distance_m": 3.0,
@@ -27,6 +30,12 @@ STARTS = {"paper-lab": (4.5, 0.6, 90.0), "office": (2.625, 3.125, 0.0)}
 def _look(expected: float, realised: float, detected: bool = False) -> dict:
     return {"action": 1, "expected_p": expected, "realised_p": realised, "detected": detected,
             "processing_s": 2.0, "motion_s": 5.0}
+
+
+def _args(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    harness.add_arguments(parser)
+    return parser.parse_args(list(argv))
 
 
 def _row(results: Path, method: str, world: str, prior: str, seed: int, motion_s: float | None,
@@ -298,3 +307,51 @@ def test_world_files_given_by_path_are_counted_under_their_folder():
             ("/data/rooms/room-1.toml", "/data/rooms/room-2.toml", "/data/other.toml", "paper-lab")]
     assert scope(rows) == ("2 world files in /data/rooms, /data/other.toml, paper-lab; seeds 0; "
                            "4 start × target scenarios")
+
+
+# --- a results.csv that is not as the harness writes it ------------------------------------------
+
+def test_a_row_cut_short_by_a_kill_is_set_aside_and_its_run_done_again(tmp_path, caplog):
+    results = tmp_path / "results.csv"
+    rows = [_row(results, "syt", "office", "uniform", seed, 100.0, 30.0) for seed in (0, 1)]
+    whole = results.read_bytes()
+    torn = whole[whole.rindex(b"\n", 0, len(whole) - 1) + 1:-40]  # the last row, its end never written
+    results.write_bytes(whole[:len(whole) - len(torn) - 40] + torn)
+    assert finished_keys(results) == {rows[0]["key"]}
+    assert (tmp_path / "results.csv.torn").read_bytes() == torn + b"\n"
+    assert "cut short" in caplog.text and [r["seed"] for r in load_results(results)] == [0]
+    append_row(results, rows[1])  # done again: a whole row, not glued to the torn one
+    assert [r["seed"] for r in load_results(results)] == [0, 1]
+
+
+@pytest.mark.parametrize(("edit", "problem"), [
+    (lambda text: text.replace(",key,", ",name,", 1), "results.csv: not an experiment's results.csv: no column key"),
+    (lambda text: text.replace("\n", ",extra\n", 2).replace(",extra", "", 1), f"results.csv:2: {len(COLUMNS) + 1} fields where the header has {len(COLUMNS)}"),
+    (lambda text: text.replace(",3,uniform,", ",three,uniform,", 1), "results.csv:2: cost 'three' for method 'syt'"),
+    (lambda text: text.replace(",3,uniform,", ",,uniform,", 1), "results.csv:2: cost '' for method 'syt'"),
+])
+def test_a_malformed_results_file_is_refused_naming_the_line_and_kept(tmp_path, caplog, edit, problem):
+    results = tmp_path / "results.csv"
+    for seed in (0, 1):
+        _row(results, "syt", "office", "uniform", seed, 100.0, 30.0)
+    results.write_text(edit(results.read_text()))
+    before = results.read_text()
+    with pytest.raises(ValueError, match="results.csv"):
+        load_results(results)
+    assert harness.main(_args("--report-only", "--out", str(tmp_path))) == 2
+    refusal = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert refusal and problem in refusal[0] and results.read_text() == before
+    assert harness.main(_args("--out", str(tmp_path), "--limit", "1")) == 2  # nor resumed into
+    assert results.read_text() == before
+
+
+def test_a_results_file_from_before_the_later_columns_is_still_reported(tmp_path):
+    results = tmp_path / "results.csv"
+    _row(results, "syt", "office", "uniform", 0, 100.0, 30.0)
+    with results.open(newline="") as f:
+        table = list(csv.reader(f))
+    with results.open("w", newline="") as f:  # the file as the first harness wrote it
+        csv.writer(f).writerows(line[:len(REQUIRED_COLUMNS)] for line in table)
+    assert harness.main(_args("--report-only", "--out", str(tmp_path))) == 0
+    row, = load_results(results)
+    assert row["run_dir"] is None and row["glances"] is None and row["time_min"] is not None
