@@ -334,15 +334,21 @@ def variant_name(method: str, cost: float | None, prior: str) -> str:
 
 
 def method_stats(rows: list[dict]) -> list[MethodStats]:
-    """SYT over all costs, SYT per cost, then each baseline in the order first seen."""
+    """SYT over all costs, SYT per cost, then each baseline in the order first seen; each over every
+    prior it ran with, which its name lists when there are several (the next table splits them)."""
     syt = [r for r in rows if r["method"] == "syt"]
-    out = [_stats("syt (all costs)", syt)] if syt else []
-    for cost in COSTS:
-        if any(r["cost"] == cost for r in syt):
-            out.append(_stats(f"syt (cost {cost})", [r for r in syt if r["cost"] == cost]))
-    for name in dict.fromkeys(r["method"] for r in rows if r["method"] != "syt"):
-        out.append(_stats(name, [r for r in rows if r["method"] == name]))
-    return out
+    groups = [("syt (all costs)", syt)] if syt else []
+    groups += [(f"syt (cost {c})", [r for r in syt if r["cost"] == c]) for c in COSTS
+               if any(r["cost"] == c for r in syt)]
+    groups += [(name, [r for r in rows if r["method"] == name])
+               for name in dict.fromkeys(r["method"] for r in rows if r["method"] != "syt")]
+    return [_stats(_with_priors(name, group), group) for name, group in groups]
+
+
+def _with_priors(name: str, rows: list[dict]) -> str:
+    """``syt (cost 3), uniform + tables``: the priors pooled in ``rows``, when there are several."""
+    priors = dict.fromkeys(r["prior"] for r in rows)
+    return f"{name}, {' + '.join(priors)}" if len(priors) > 1 else name
 
 
 def _scenario(row: dict) -> tuple:
@@ -697,7 +703,7 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
         lines += _table_md(prior, ours, rows)
     lines += _time_md(rows)
     lines += ["## Success, SPL, planning latency", "",
-              f"SYT success rate: **{'—' if rate is None else f'{100 * rate:.1f}%'}** "
+              f"SYT success rate, all its runs pooled: **{'—' if rate is None else f'{100 * rate:.1f}%'}** "
               f"(report: {100 * REPORT_SUCCESS:.0f}%). "
               "SPL: success × shortest path / max(driven, shortest path), the shortest path being the collision-free "
               "path on the true floor map to the closest position from which the detector's measured table gives a "
