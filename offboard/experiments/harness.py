@@ -377,7 +377,8 @@ def _prepare(runs: list[Run], out: Path) -> dict[str, tuple[WorldFacts, Path, Pa
         hints = out / "priors"
         hints.mkdir(parents=True, exist_ok=True)
         picture = world.picture_file(out / "pictures")
-        hint_file = hints / f"{world.name}-tables.toml"
+        tag = hashlib.sha1(str(world.path.resolve()).encode()).hexdigest()[:8]  # two worlds may share a name
+        hint_file = hints / f"{world.name}-{tag}-tables.toml"
         if any(r.world == name and r.prior == "tables" for r in runs):
             try:
                 hint_file.write_text(tables_hints(world))
@@ -537,7 +538,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="Θ_move for the SYT runs, which then move by the report's threshold rule "
                              "(default: the rate rule); a folder swept with another is refused")
     parser.add_argument("--config", type=Path, metavar="FILE.toml",
-                        help="search configuration (SearchConfig) for every run; a folder swept with another is refused")
+                        help="search configuration (SearchConfig) for every run; a folder swept with another "
+                             "is refused")
     parser.add_argument("--limit", type=int, metavar="N", help="only the first N runs of the grid")
     parser.add_argument("--run-timeout-s", type=float, default=3600.0, metavar="SECONDS", help="wall clock per run")
     parser.add_argument("--report-only", action="store_true", help="rewrite report.md and the plots from results.csv")

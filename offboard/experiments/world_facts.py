@@ -268,7 +268,7 @@ class WorldFacts:
         if own.is_file():
             return own
         folder.mkdir(parents=True, exist_ok=True)
-        out = folder / f"{self.name}.png"
+        out = folder / f"{Path(self.target_picture).stem}.png"  # named as built: two worlds' may share a name
         subprocess.run([sys.executable, "-m", "onboard.cli", "picture", Path(self.target_picture).stem,
                         "--out", str(out)], check=True, capture_output=True)
         return out

@@ -226,6 +226,23 @@ def test_a_tables_prior_with_one_table_is_flagged_as_giving_the_target_away(tmp_
     assert any("one surface holds all its mass" in r.getMessage() for r in caplog.records if r.levelname == "WARNING")
 
 
+
+def test_two_worlds_of_one_name_in_a_sweep_keep_their_own_tables_prior(tmp_path):
+    runs = []
+    for folder, x in (("a", 0.5), ("b", 3.5)):  # both named "twin", each with its table elsewhere
+        (tmp_path / folder).mkdir()
+        world = tmp_path / folder / "twin.toml"
+        world.write_text(SMALL_ROOM.format(name="twin", height=2.5, position="[1.5, 3.5, 0.0]", furniture=f"""
+[[obstacle]]
+name = "table-{folder}"
+kind = "table"
+min = [{x}, 2.5, 0.0]
+max = [{x + 1}, 3.0, 0.7]"""))
+        runs.append(Run("syt", str(world), (1.0, 1.0, 0.0), (x + 0.5, 2.75, 0.7, -90.0), 3, "tables", 0))
+    prepared = experiment._prepare(runs, tmp_path / "out")
+    tables = [[h.name for h in load_config(HintsFile, prepared[r.world][2]).hint] for r in runs]
+    assert tables == [["table-a"], ["table-b"]]
+
 # --- the report ------------------------------------------------------------------------------------
 
 def _synthetic_results(path: Path) -> None:

@@ -154,7 +154,7 @@ def test_the_planner_gets_the_worlds_own_picture_or_the_built_in_one_it_names(tm
 
     office = load_facts("office")  # picture = "target": built in
     built = office.picture_file(tmp_path / "pictures")
-    assert built == tmp_path / "pictures" / "office.png" and cv2.imread(str(built)) is not None
+    assert built == tmp_path / "pictures" / "target.png" and cv2.imread(str(built)) is not None
     own = tmp_path / "mine.png"
     cv2.imwrite(str(own), np.full((64, 64, 3), 200, np.uint8))
     room = tmp_path / "room.toml"
