@@ -41,6 +41,7 @@ class Side:
     spl: float  # over all paired runs, a failure counting 0
     looks: float | None  # over the runs both sweeps found
     distance_m: float | None  # likewise
+    errors: int = 0  # runs that crashed or timed out: failures, but not the search's doing
 
 
 @dataclass(frozen=True)
@@ -135,7 +136,8 @@ def _paired(variant: str, group: str, pairs: list[tuple[dict, dict]]) -> PairedG
     def side(pick: Callable[[tuple[dict, dict]], dict]) -> Side:
         mine = [pick(p) for p in pairs]
         return Side(sum(r["success"] for r in mine), statistics.fmean(r["spl"] or 0.0 for r in mine),
-                    *(mean_of([pick(p)[column] for p in found_both]) for column in ("actions", "distance_m")))
+                    *(mean_of([pick(p)[column] for p in found_both]) for column in ("actions", "distance_m")),
+                    sum(r["status"].startswith("error") for r in mine))
 
     diffs = {placement(a): (b["spl"] or 0.0) - (a["spl"] or 0.0) for a, b in pairs}
     changed = sum(any(a[c] != b[c] for c in OUTCOME) for a, b in pairs)
@@ -186,6 +188,11 @@ def comparison_md(c: Comparison) -> str:
             stderr = "" if t.stderr_ms is None else f" ({t.stderr_ms:.1f})"
             lines.append(f"| {t.variant} | {t.runs} | {t.base_median_ms:.0f} → {t.new_median_ms:.0f} | "
                          f"{t.base_p95_ms:.0f} → {t.new_p95_ms:.0f} | {t.difference_ms:+.1f}{stderr} |")
+    crashed = "; ".join(f"{g.variant}: {g.base.errors} in base, {g.new.errors} in new" for g in c.groups
+                        if g.group == "all" and (g.base.errors or g.new.errors))
+    if crashed:
+        lines += ["", "Crashed or timed out, counted as failures though not the search's doing (run `experiment` "
+                      f"again with the same --out to redo them): {crashed}."]
     if c.only_base or c.only_new:
         lines += ["", f"Not compared: {c.only_base} runs only in base, {c.only_new} only in new."]
     return "\n".join(lines) + "\n"

@@ -27,7 +27,8 @@ def _write(folder: Path, outcomes: dict[tuple, tuple], method: str = "syt", worl
             "method": method, "world": world_as(world), "start": start, "target": "own",
             "cost": 3 if method == "syt" else "", "prior": "uniform", "seed": seed, "found": success,
             "success": success, "spl": spl if success else 0.0, "actions": looks, "distance_m": distance,
-            "shortest_path_m": shortest, "planning_ms_p95": p95, "key": f"{method}-{world_as(world)}-{index}-{seed}"})
+            "shortest_path_m": shortest, "planning_ms_p95": p95, "key": f"{method}-{world_as(world)}-{index}-{seed}",
+            "status": "found" if success else "budget"})
     return folder
 
 
@@ -108,6 +109,20 @@ def test_the_command_prints_json_and_markdown(tmp_path, capsys):
     assert "| SYT cost 3, uniform | 6 | 3 | 6 / 5 | 0.783 → 0.567 | -0.217 (0.109) |" in markdown
     assert "Not compared: 0 runs only in base, 1 only in new." in markdown
 
+
+def test_a_run_that_crashed_is_named_apart_from_a_search_that_failed(tmp_path, capsys):
+    base, new = _write(tmp_path / "base", BASE), _write(tmp_path / "new", _changed())
+    with (new / "results.csv").open() as f:
+        lines = f.read().splitlines()
+    crashed = next(i for i, line in enumerate(lines) if ",budget," in line)  # the failed run: a timeout instead
+    lines[crashed] = lines[crashed].replace(",budget,", ",error: timeout,")
+    (new / "results.csv").write_text("\n".join(lines) + "\n")
+    every = compare(load_sweep(base), load_sweep(new)).groups[0]
+    assert (every.base.errors, every.new.errors, every.new.found) == (0, 1, 5)
+    assert main(["compare", str(base), str(new)]) == 0
+    assert "SYT cost 3, uniform: 0 in base, 1 in new" in capsys.readouterr().out
+    assert main(["compare", str(base), str(base)]) == 0
+    assert "Crashed or timed out" not in capsys.readouterr().out
 
 def test_the_command_names_a_folder_without_results_and_sweeps_with_nothing_in_common(tmp_path, caplog):
     base = _write(tmp_path / "base", BASE)
