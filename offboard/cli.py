@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 from shared.arguments import floats, probability
+from shared.config import ConfigError
 from shared.transport import DEFAULT_LEASE_MS, TransportConfig, add_transport_args, transport_from_args
 
 log = logging.getLogger("syt.offboard")
@@ -313,10 +314,16 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from offboard.perception.detection.target_model import TargetModelError
+
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    return args.func(args)
+    try:
+        return args.func(args)
+    except (ConfigError, TargetModelError) as exc:  # a bad file or value given: named, not a traceback
+        log.error("%s", exc)
+        return 2
 
 
 if __name__ == "__main__":

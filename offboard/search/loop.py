@@ -48,13 +48,17 @@ from offboard.perception.stereo import StereoConfig, StereoMatcher
 from offboard.planning.time_model import TimeModel
 from offboard.search.top_view import LookTrace, draw_top_view
 from offboard.perception.voxel_grid import VoxelGrid
-from shared.config import load_config
+from shared.config import ConfigError, load_config
 from shared.geometry import Pose2D, RigidTransform
 from shared.messages import Capture, RobotState
 from shared.strict import bounds
 
 log = logging.getLogger(__name__)
 _NOMINAL_DRIVE_M = 2.0  # the weight of the nominal driving rate: one short run moves the estimate halfway
+
+
+ROOM_SIDE_M = (0.5, 100.0)  # the search region's sides
+MAX_CUBES = 20_000_000  # about 1 GB of belief, map and their caches: a 25 × 20 × 4 m hall in 5 cm cubes
 
 
 @dataclass(frozen=True)
@@ -99,6 +103,16 @@ class SearchConfig:
     planner: PlannerConfig = PlannerConfig()
     occupancy: OccupancyConfig = OccupancyConfig()
     stereo: StereoConfig = StereoConfig()
+
+    def __post_init__(self) -> None:
+        # here, not as field bounds: a request's room (--room, a world's) replaces the file's after loading
+        lo, hi = ROOM_SIDE_M
+        if not all(lo <= side <= hi for side in self.room_m):
+            raise ConfigError("room_m", self.room_m, f"each side must be {lo:g} to {hi:g} m")
+        cubes = math.prod(math.ceil(side / self.resolution_m) for side in self.room_m)
+        if cubes > MAX_CUBES:
+            raise ConfigError("room_m", self.room_m, f"{cubes:,} cubes of {self.resolution_m:g} m, more than "
+                                                     f"{MAX_CUBES:,}: give a coarser resolution_m")
 
 
 class Policy(Protocol):

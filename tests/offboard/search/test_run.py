@@ -173,6 +173,33 @@ def test_a_configuration_file_keeps_the_values_no_option_overrides(tmp_path):
     assert (report.planner.move_rule, report.planner.move_threshold) == ("threshold", 0.2)
 
 
+@pytest.mark.parametrize("room, problem", [
+    ("1e5,1e5,3", "room_m: each side must be 0.5 to 100 m"),  # once allocated until the machine gave out
+    ("40,40,4", "room_m: 51,200,000 cubes of 0.05 m, more than 20,000,000: give a coarser resolution_m"),
+])
+def test_a_room_too_large_to_hold_is_refused_by_name_before_it_connects(tmp_path, room, problem):
+    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(tmp_path / "t.png")],
+                   check=True, capture_output=True)
+    done = subprocess.run([sys.executable, "-m", "offboard.cli", "search", "--target-picture", str(tmp_path / "t.png"),
+                           "--room", room, "--out", str(tmp_path / "out"), "--connect", "tcp/127.0.0.1:9",
+                           "--no-multicast-scouting"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and problem in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize("room", ["[1e5, 1e5, 3]", "[9, nan, 2.5]", "[9, -5, 2.5]", "[40, 40, 4]"])
+def test_a_configuration_file_with_a_room_too_large_to_hold_is_refused_by_name(tmp_path, room):
+    from offboard.search.loop import SearchConfig
+    from shared.config import ConfigError, load_config
+
+    config = tmp_path / "search.toml"
+    config.write_text(f"room_m = {room}\n")
+    with pytest.raises(ConfigError, match="search.toml: room_m"):
+        load_config(SearchConfig, config)
+    config.write_text(f"room_m = {room}\nresolution_m = 0.1\n")  # 40 × 40 × 4 m fits in 10 cm cubes
+    if room == "[40, 40, 4]":
+        assert load_config(SearchConfig, config).room_m == (40.0, 40.0, 4.0)
+
+
 @pytest.mark.parametrize("spec, problem", [("surface", "unknown kind 'surface'"), ("hints", "needs a file"),
                                            ("last-seen:1,2", "3 or 4 numbers"), ("last-seen:1,x,2", "3 or 4 numbers"),
                                            ("uniform:3", "takes no argument")])
