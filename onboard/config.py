@@ -33,6 +33,7 @@ from onboard.hardware.ptu import PtuConfig
 from onboard.hardware.uvc_camera import UvcStereoConfig
 from shared.geometry import HeadMount, Intrinsics
 from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
+from shared.messages import HEARTBEAT_PERIOD_S
 from shared.strict import bounds
 
 
@@ -96,7 +97,8 @@ class HardwareConfig:
 @dataclass(frozen=True)
 class OnboardConfig:
     backend: Literal["sim", "hardware"] = "sim"  # hardware: [hardware] below
-    watchdog_ms: int = field(default=800, metadata=bounds(50, 60_000))  # stop if the planner is silent (4 heartbeats)
+    # stop if the planner is silent this long (4 heartbeats); shorter than 3, one late beat would stop every motion
+    watchdog_ms: int = field(default=800, metadata=bounds(round(3000 * HEARTBEAT_PERIOD_S), 60_000))
     publish_hz: float = field(default=10.0, metadata=bounds(0.1, 200.0))  # odometry and pan/tilt
     base: BaseLimits = BaseLimits()
     pantilt: PanTiltLimits = PanTiltLimits()

@@ -269,9 +269,13 @@ class Info:
     watchdog_ms: int = field(metadata=bounds(1, 3_600_000))
 
 
+HEARTBEAT_PERIOD_S = 0.2  # the planner's beat; the agent's watchdog waits for at least three
+
+
 @dataclass(frozen=True)
 class Heartbeat:
-    """Published by the planner while it drives the robot; the agent's watchdog listens for it."""
+    """Published by the planner every :data:`HEARTBEAT_PERIOD_S` while it drives the robot; the agent's
+    watchdog listens for it."""
 
     planner_id: str
     seq: int = field(metadata=bounds(0, None))

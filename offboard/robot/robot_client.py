@@ -31,7 +31,7 @@ _LONGEST_MOTION_S = 3600.0
 
 
 class RobotClient:
-    def __init__(self, session: zenoh.Session, robot_id: str, heartbeat_hz: float = 5.0):
+    def __init__(self, session: zenoh.Session, robot_id: str):
         self.session = session
         self.keys = RobotKeys(robot_id)
         self.planner_id = re.sub(r"[^A-Za-z0-9_-]", "-", f"{socket.gethostname()}-{os.getpid()}")[:64]
@@ -41,8 +41,7 @@ class RobotClient:
         self._token = session.liveliness().declare_token(self.keys.planner_alive(self.planner_id))
         self._heartbeat_pub = session.declare_publisher(self.keys.heartbeat,
                                                         congestion_control=zenoh.CongestionControl.DROP)
-        self._heartbeat = threading.Thread(target=self._beat, args=(1.0 / heartbeat_hz,),
-                                           name="heartbeat", daemon=True)
+        self._heartbeat = threading.Thread(target=self._beat, name="heartbeat", daemon=True)
         self._heartbeat.start()
 
     def __enter__(self) -> RobotClient:
@@ -138,9 +137,9 @@ class RobotClient:
         slowest = head.slew_time_s(head.pan_max_deg - head.pan_min_deg, head.tilt_max_deg - head.tilt_min_deg)
         return 2.0 * slowest + 30.0
 
-    def _beat(self, period_s: float) -> None:
+    def _beat(self) -> None:
         for seq in itertools.count():
-            if self._closed.wait(period_s):
+            if self._closed.wait(m.HEARTBEAT_PERIOD_S):
                 return
             try:
                 self._heartbeat_pub.put(encode(m.Heartbeat(self.planner_id, seq)))

@@ -14,14 +14,14 @@ def test_no_file_gives_runnable_defaults():
 
 def test_file_and_overrides(tmp_path):
     path = tmp_path / "robot.toml"
-    path.write_text('watchdog_ms = 500\n[base]\nmax_speed_m_s = 0.8\n[sim]\nworld = "office"\n')
+    path.write_text('watchdog_ms = 700\n[base]\nmax_speed_m_s = 0.8\n[sim]\nworld = "office"\n')
     config = load_config(OnboardConfig, path, {"sim.realtime": True})
-    assert (config.watchdog_ms, config.base.max_speed_m_s, config.sim.world, config.sim.realtime) == (500, 0.8, "office", True)
+    assert (config.watchdog_ms, config.base.max_speed_m_s, config.sim.world, config.sim.realtime) == (700, 0.8, "office", True)
 
 
 @pytest.mark.parametrize("text,key", [
     ("watchdog_ms = 'fast'\n", "watchdog_ms"),
-    ("watchdog_ms = 10\n", "watchdog_ms"),  # below the 50 ms floor
+    ("watchdog_ms = 500\n", "watchdog_ms"),  # under three of the planner's 200 ms heartbeats
     ("[base]\nmax_sped_m_s = 1.0\n", "base.max_sped_m_s"),  # a typo is not silently ignored
     ("[base]\ndefault_speed_m_s = 2.0\nmax_speed_m_s = 1.0\n", "base"),
     ("backend = 'serial'\n", "backend"),
