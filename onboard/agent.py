@@ -100,6 +100,7 @@ class _PlannerWatch:
 
     last_contact_s: float = 0.0
     token_lost: bool = False
+    bad_heartbeat: bool = False  # the last sample on the heartbeat key was not one: said once, not at every beat
 
 
 class Agent:
@@ -183,6 +184,14 @@ class Agent:
         return enqueue
 
     def _on_heartbeat(self, sample: zenoh.Sample) -> None:
+        try:  # only a heartbeat is word from the planner, not anything put on its key
+            decode(sample.payload.to_bytes(), m.Heartbeat)
+        except ProtocolError as exc:
+            if not self._watch.bad_heartbeat:
+                log.warning("ignoring what is not a heartbeat on %s: %s", sample.key_expr, exc)
+            self._watch.bad_heartbeat = True
+            return
+        self._watch.bad_heartbeat = False
         self._watch.last_contact_s = time.monotonic()
 
     def _on_planner_liveliness(self, sample: zenoh.Sample) -> None:

@@ -237,6 +237,23 @@ def test_the_watchdog_stops_a_silent_planner(tmp_path, box_world):
     assert "watchdog: no word from the planner" in (tmp_path / "onboard.log").read_text()
 
 
+def test_what_is_not_a_heartbeat_on_its_key_does_not_keep_the_robot_moving(tmp_path, box_world):
+    with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):
+        robot.close()  # nobody sends real heartbeats or holds a planner token
+        keys = RobotKeys("syt")
+        with client_transport(agent).open() as session:
+            odometry = session.declare_subscriber(keys.odometry, zenoh.handlers.RingChannel(1))
+            noise = session.declare_publisher(keys.heartbeat)
+            session.get(keys.move, payload=encode(m.MoveCommand("noisy", distance_m=4.0, speed_m_s=0.3)), timeout=30.0)
+            for _ in range(25):  # 2.5 s of garbage, ten times a second: the watchdog (0.8 s) must still fire
+                noise.put(b"\x00not msgpack")
+                time.sleep(0.1)
+            last = decode(odometry.recv().payload.to_bytes(), m.Odometry)
+            assert not last.moving and 0.0 < last.pose.x_m - 0.5 < 0.6
+    log_text = (tmp_path / "onboard.log").read_text()
+    assert "watchdog: no word from the planner" in log_text
+    assert log_text.count("ignoring what is not a heartbeat") == 1  # said once, not 25 times
+
 def test_a_second_motion_while_moving_is_refused_and_stop_interrupts(tmp_path, box_world):
     with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):
         results = []
