@@ -78,7 +78,10 @@ class DeviceWorker:
         return True
 
     def close(self) -> None:
-        self._jobs.put(None)
+        try:  # a device stuck in a job holds a queued one: give up on it rather than hang the agent's exit
+            self._jobs.put(None, timeout=5.0)
+        except queue.Full:
+            log.error("%s worker: still busy after 5 s; left behind", self.name)
         self._thread.join(timeout=5.0)
 
     def _loop(self) -> None:
@@ -90,8 +93,11 @@ class DeviceWorker:
                 log.exception("%s worker: job failed", self.name)
             finally:
                 self._busy.clear()  # free before the reply: the planner's next command may follow at once
-            if answer is not None:
-                answer()
+            try:
+                if answer is not None:
+                    answer()
+            except Exception:  # nor a failed reply: the thread would be gone and the device busy for good
+                log.exception("%s worker: reply failed", self.name)
 
 
 @dataclass

@@ -1,0 +1,54 @@
+"""The agent's per-device worker: one job at a time, and a fault in a job or its reply never leaves the
+device busy for good."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from onboard.agent import DeviceWorker
+
+
+def _run(worker: DeviceWorker, job) -> None:
+    assert worker.try_submit(job), "the device is still busy"
+
+
+@pytest.mark.parametrize("fault", ["job", "reply"])
+def test_a_job_or_a_reply_that_raises_leaves_the_device_free_for_the_next(fault, caplog):
+    worker = DeviceWorker("pantilt")
+    replied, done = threading.Event(), threading.Event()
+
+    def failing_reply() -> None:
+        replied.set()
+        raise ConnectionError("the querier went away")
+
+    def failing_job():
+        if fault == "job":
+            replied.set()
+            raise OSError("the serial port is gone")
+        return failing_reply
+
+    try:
+        _run(worker, failing_job)
+        assert replied.wait(2.0)
+        for _ in range(200):  # the worker frees itself before the reply
+            if not worker.busy:
+                break
+            threading.Event().wait(0.01)
+        _run(worker, lambda: done.set())
+        assert done.wait(2.0)  # the thread lives on and takes the next job
+        assert f"pantilt worker: {fault} failed" in caplog.text
+    finally:
+        worker.close()
+
+
+def test_a_second_job_is_refused_while_the_first_runs():
+    worker = DeviceWorker("base")
+    release = threading.Event()
+    try:
+        _run(worker, release.wait)
+        assert worker.busy and not worker.try_submit(lambda: None)
+        release.set()
+    finally:
+        worker.close()
