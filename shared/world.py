@@ -63,6 +63,7 @@ from shared.geometry import Pose2D
 WORLDS_DIR = Path(__file__).parent / "worlds"
 FLOOR_OBSTACLE_MAX_Z_M = 1.5
 DEFAULT_ROBOT_RADIUS_M = 0.26
+MAX_ROOM_SIDE_M = 100.0  # a building's floor, well inside the wire's poses; the planner holds its region to it
 _TOL_M = 1e-3  # contact tolerance: resting on a surface or touching a wall is not an overlap
 
 Vec3 = tuple[float, float, float]
@@ -421,6 +422,8 @@ def world_toml(data: dict[str, Any], comment: str = "") -> str:
 
 def _validate(world: World) -> None:
     size = np.array(world.room.size_m)
+    if np.any(size > MAX_ROOM_SIDE_M):
+        raise WorldError(f"room.size: every side must be at most {MAX_ROOM_SIDE_M:g} m (got {_listed(size)})")
     for i, box in enumerate(world.obstacles):
         key = f"obstacle[{i}]"
         lo, hi = np.array(box.min_m), np.array(box.max_m)

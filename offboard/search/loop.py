@@ -52,12 +52,13 @@ from shared.config import ConfigError, load_config
 from shared.geometry import Pose2D, RigidTransform
 from shared.messages import Capture, RobotState
 from shared.strict import bounds
+from shared.world import MAX_ROOM_SIDE_M
 
 log = logging.getLogger(__name__)
 _NOMINAL_DRIVE_M = 2.0  # the weight of the nominal driving rate: one short run moves the estimate halfway
 
 
-ROOM_SIDE_M = (0.5, 100.0)  # the search region's sides
+ROOM_SIDE_M = (0.5, MAX_ROOM_SIDE_M)  # the search region's sides
 MAX_CUBES = 20_000_000  # about 1 GB of belief, map and their caches: a 25 × 20 × 4 m hall in 5 cm cubes
 
 

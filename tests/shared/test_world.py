@@ -120,6 +120,8 @@ def test_a_minimal_valid_world_and_its_defaults(tmp_path):
         (edit("size = [0.2, 0.2, 0.2]", "size = [0.4, 0.1, 0.3]").replace("yaw_deg = -90", "yaw_deg = -90\nsides = 4"),
          "target.size: a target pictured on 4 sides needs a square footprint (size[0] == size[1]), got [0.4, 0.1, 0.3]"),
         (edit("size = [6.0, 4.0, 2.5]", "size = [6.0, -4.0, 2.5]"), "room.size"),
+        # larger than the wire's poses (±10 km) once: it loaded, and then its robot's poses were refused
+        (edit("size = [6.0, 4.0, 2.5]", "size = [20000.0, 4.0, 2.5]"), "room.size: every side must be at most 100 m"),
         (edit("max = [3.0, 3.0, 0.75]", "max = [3.0, 2.0, 0.75]"), "obstacle[0].max: max must exceed min"),
         (edit("max = [3.0, 3.0, 0.75]", "max = [6.5, 3.0, 0.75]"),
          "obstacle[0].max: obstacle 'table' lies outside the room [6, 4, 2.5] (max [6.5, 3, 0.75])"),
