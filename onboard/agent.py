@@ -47,6 +47,7 @@ _SIM_ONLY = ("sim_truth", "sim_teleport", "sim_reset", "sim_fault")
 # dashboard, a crowd of them), and that must not keep alive a motion whose planner froze.
 _PLANNER_COMMANDS = ("move", "stop", "look", "capture")
 _WATCHDOG_POLL_S = 0.02  # how often the watchdog looks at a moving base
+_ARRIVED_M = 1e-3  # a waypoint this near the robot is where it stands
 
 
 class CommandRefused(Exception):
@@ -272,9 +273,14 @@ class Agent:
         limits = self.devices.base.limits
         if cmd.waypoint_m is not None:
             pose = self.devices.base.reading().pose
-            turn_rad, distance_m = pose.bearing_to(*cmd.waypoint_m), pose.distance_to(*cmd.waypoint_m)
-        else:
-            turn_rad, distance_m = math.radians(cmd.turn_deg), cmd.distance_m
+            distance_m = pose.distance_to(*cmd.waypoint_m)
+            if distance_m > limits.max_distance_m:
+                raise CommandRefused("limit", f"waypoint_m={list(cmd.waypoint_m)} is {distance_m:g} m away, more "
+                                              f"than max_distance_m={limits.max_distance_m:g}")
+            # already there: its bearing is noise, and turning to it would spin the robot for nothing
+            turn_rad = pose.bearing_to(*cmd.waypoint_m) if distance_m >= _ARRIVED_M else 0.0
+            return turn_rad, distance_m if distance_m >= _ARRIVED_M else 0.0
+        turn_rad, distance_m = math.radians(cmd.turn_deg), cmd.distance_m
         if abs(math.degrees(turn_rad)) > limits.max_turn_deg:
             raise CommandRefused("limit", f"turn_deg={math.degrees(turn_rad):g} exceeds max_turn_deg={limits.max_turn_deg:g}")
         if abs(distance_m) > limits.max_distance_m:

@@ -66,10 +66,22 @@ def test_waypoint_and_stop(sim_agent):
     assert stop.pose == robot.state().pose and not robot.state().base_moving
 
 
+def test_a_waypoint_where_the_robot_stands_neither_turns_nor_drives_it(sim_agent):
+    _, robot = sim_agent
+    robot.move(turn_deg=40.0)  # a heading the old code turned back from: by −heading, towards nothing
+    before = robot.state().pose
+    result = robot.move_to(before.x_m, before.y_m)
+    assert result.status == "done" and result.distance_m == 0.0
+    assert (result.pose.x_m, result.pose.y_m, result.pose.heading_deg) == \
+        pytest.approx((before.x_m, before.y_m, before.heading_deg), abs=1e-6)
+    robot.move(turn_deg=-40.0)
+
+
 @pytest.mark.parametrize("call,code,words", [
     (lambda r: r.look(170.0, 0.0), "limit", "pan limit"),
     (lambda r: r.look(0.0, -60.0), "limit", "tilt limit"),
     (lambda r: r.move(distance_m=50.0), "limit", "max_distance_m"),
+    (lambda r: r.move_to(5000.0, 5000.0), "limit", "waypoint_m=[5000.0, 5000.0] is "),  # not "distance_m=", unset
     (lambda r: r.move(distance_m=1.0, speed_m_s=5.0), "limit", "max_speed_m_s"),
 ])
 def test_out_of_range_commands_are_refused_naming_the_limit(sim_agent, call, code, words):
