@@ -21,9 +21,17 @@ from typing import Any, Literal, Union
 import numpy as np
 
 
-# A value is shown a few levels deep: plain repr recurses, so a payload of ~1000 nested arrays (which
-# msgpack still unpacks) raised RecursionError while its own error was being written.
-_SHOWN = reprlib.Repr()
+class _Shown(reprlib.Repr):
+    """A value shown a few levels deep: plain repr recurses, so a payload of ~1000 nested arrays (which
+    msgpack still unpacks) raised RecursionError while its own error was being written. Bytes are cut
+    before they are shown: reprlib would repr all of them first (four times a 100 MB payload's size)."""
+
+    def repr_bytes(self, value: bytes, level: int) -> str:
+        head = repr(value[:self.maxstring])
+        return head if len(value) <= self.maxstring else f"{len(value)} bytes: {head}..."  # the length first
+
+
+_SHOWN = _Shown()
 _SHOWN.maxlevel, _SHOWN.maxstring, _SHOWN.maxother, _SHOWN.maxlong = 3, 80, 80, 80
 
 

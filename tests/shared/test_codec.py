@@ -133,6 +133,21 @@ def test_arrays_nested_as_deep_as_msgpack_allows_are_a_protocol_error(depth):
         decode(b"\x91" * depth + b"\xc0")
 
 
+def test_a_large_rejected_bytes_value_is_named_without_being_copied_whole():
+    import tracemalloc
+
+    big = b"\x01" * (20 * 1024 * 1024)  # 20 MB where the command id should be
+    payload = msgpack.packb({"schema": 1, "type": "StopCommand", "body": {"command_id": big}}, use_bin_type=True)
+    tracemalloc.start()
+    try:
+        with pytest.raises(ProtocolError, match=r"command_id: expected a string \(got 20971520 bytes: b'\\x01") as refused:
+            decode(payload, m.StopCommand)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert len(str(refused.value)) < 300
+    assert peak < 30 * 1024 * 1024  # the value, not its repr (80 MB) as well
+
 @given(st.binary(max_size=200))
 def test_random_bytes_never_escape_as_anything_but_protocol_error(data):
     try:
