@@ -7,7 +7,7 @@ pairs; a sweep holding two worlds of one name from different folders pairs on th
 With a fixed ``planned_processing_s`` a run repeats exactly (unless it runs to the budget K, which
 counts the processing measured), so a run that changed, changed because of what differs between the
 sweeps (the code or the configuration). SPL is paired as the report
-pairs SYT with a baseline: a failure counts 0, and its standard error counts each scenario once
+pairs SYT with a baseline: a failure counts 0, and its mean and standard error count each scenario once
 (:func:`~offboard.experiments.report.paired_stderr`). Looks and distance are over the runs both
 sweeps found. The runs are also grouped by SPL's shortest path
 (:func:`~offboard.experiments.report.distance_group`), where a change near the target and one far
@@ -19,7 +19,6 @@ fair between sweeps run on the same machine on the same day.
 
 from __future__ import annotations
 
-import statistics
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -27,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from offboard.experiments.calibration import cell
-from offboard.experiments.report import by_distance, load_results, mean_of, paired_stderr, placement, variant_name
+from offboard.experiments.report import (by_distance, load_results, mean_of, paired_stderr, placement, scenario_mean,
+                                         variant_name)
 
 RESULTS_FILE = "results.csv"
 OUTCOME = ("success", "actions", "distance_m", "spl")  # a run whose outcome differs in any of these changed
@@ -38,7 +38,7 @@ class Side:
     """One sweep's figures on the paired runs."""
 
     found: int  # runs that succeeded
-    spl: float  # over all paired runs, a failure counting 0
+    spl: float  # over all paired runs, a failure counting 0, each scenario once (its seeds averaged)
     looks: float | None  # over the runs both sweeps found
     distance_m: float | None  # likewise
     errors: int = 0  # runs that crashed or timed out: failures, but not the search's doing
@@ -135,7 +135,7 @@ def _paired(variant: str, group: str, pairs: list[tuple[dict, dict]]) -> PairedG
 
     def side(pick: Callable[[tuple[dict, dict]], dict]) -> Side:
         mine = [pick(p) for p in pairs]
-        return Side(sum(r["success"] for r in mine), statistics.fmean(r["spl"] or 0.0 for r in mine),
+        return Side(sum(r["success"] for r in mine), scenario_mean({placement(r): r["spl"] or 0.0 for r in mine}),
                     *(mean_of([pick(p)[column] for p in found_both]) for column in ("actions", "distance_m")),
                     sum(r["status"].startswith("error") for r in mine))
 

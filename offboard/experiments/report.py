@@ -403,9 +403,19 @@ def spl_margins(rows: list[dict], cost: int = 3) -> list[SplMargin]:
             diffs = {s: syt[s] - theirs[s] for s in common}
             by_seed = tuple((seed, statistics.fmean([d for s, d in diffs.items() if s[-1] == seed]))
                             for seed in sorted({s[-1] for s in common}))
-            out.append(SplMargin(name, prior, their_prior, len(common), statistics.fmean(syt[s] for s in common),
-                                 statistics.fmean(theirs[s] for s in common), paired_stderr(diffs), by_seed))
+            out.append(SplMargin(name, prior, their_prior, len(common), scenario_mean({s: syt[s] for s in common}),
+                                 scenario_mean({s: theirs[s] for s in common}), paired_stderr(diffs), by_seed))
     return out
+
+
+def scenario_mean(values: dict[tuple, float]) -> float:
+    """The mean of per-run values keyed by placement (:func:`placement`), each scenario counted once,
+    its seeds averaged: as :func:`paired_stderr` counts them, so that a difference of two such means is
+    the one its standard error is of, even where scenarios ran with different numbers of seeds."""
+    seeds: dict[tuple, list[float]] = {}
+    for key, value in values.items():
+        seeds.setdefault(key[:-1], []).append(value)
+    return statistics.fmean(statistics.fmean(v) for v in seeds.values())
 
 
 def paired_stderr(diffs: dict[tuple, float]) -> float | None:
@@ -459,9 +469,10 @@ def prior_gains(rows: list[dict], reference: str = "uniform") -> list[PriorGain]
             continue
         both = [(a["actions"], b["actions"]) for a, b in pairs if a["success"] and b["success"]]
         diffs = {placement(a): (a["spl"] or 0.0) - (b["spl"] or 0.0) for a, b in pairs}
-        out.append(PriorGain(cost, prior, reference, len(pairs), statistics.fmean(a["spl"] or 0.0 for a, _ in pairs),
-                             statistics.fmean(b["spl"] or 0.0 for _, b in pairs), paired_stderr(diffs), len(both),
-                             mean_of([a for a, _ in both]), mean_of([b for _, b in both])))
+        out.append(PriorGain(cost, prior, reference, len(pairs),
+                             scenario_mean({placement(a): a["spl"] or 0.0 for a, _ in pairs}),
+                             scenario_mean({placement(b): b["spl"] or 0.0 for _, b in pairs}), paired_stderr(diffs),
+                             len(both), mean_of([a for a, _ in both]), mean_of([b for _, b in both])))
     return out
 
 

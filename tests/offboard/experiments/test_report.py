@@ -135,6 +135,27 @@ def test_the_standard_error_counts_each_scenario_once_its_seeds_averaged(tmp_pat
     assert tables.stderr == pytest.approx(expected)
 
 
+def test_with_more_seeds_in_one_scenario_the_margin_still_counts_each_scenario_once(tmp_path):
+    results = tmp_path / "results.csv"
+    seeds = {"office": (0, 1, 2), "paper-lab": (0,)}  # an interrupted sweep: paper-lab ran one seed
+    for world, ran in seeds.items():
+        for seed in ran:
+            _row(results, "syt", world, "uniform", seed, 100.0, 30.0, distance_m=0.0)
+            _row(results, "exhaustive", world, "uniform", seed, 100.0, 30.0, distance_m=8.0 + 4 * seed)
+            _row(results, "syt", world, "tables", seed, 100.0, 30.0, distance_m=8.0 + 4 * seed)
+    rows = load_results(results)
+    spl = {(r["method"], r["prior"], r["world"], r["seed"]): r["spl"] or 0.0 for r in rows}
+    per_scenario = [statistics.fmean(spl["syt", "uniform", w, s] - spl["exhaustive", "uniform", w, s] for s in ran)
+                    for w, ran in seeds.items()]
+    per_run = statistics.fmean(spl["syt", "uniform", w, s] - spl["exhaustive", "uniform", w, s]
+                               for w, ran in seeds.items() for s in ran)
+    assert per_run != pytest.approx(statistics.fmean(per_scenario))
+    margin = {m.baseline: m for m in spl_margins(rows) if m.prior == "uniform"}["exhaustive"]
+    assert margin.difference == pytest.approx(statistics.fmean(per_scenario))  # the mean its error is of
+    assert margin.stderr == pytest.approx(statistics.stdev(per_scenario) / 2 ** 0.5)
+    gain = {g.prior: g for g in prior_gains(rows)}["tables"]
+    assert gain.spl - gain.reference_spl == pytest.approx(-statistics.fmean(per_scenario))
+
 def test_runs_are_grouped_by_how_far_the_target_was_nearest_first(tmp_path):
     results = tmp_path / "results.csv"
     shortest_paths = (4.0, "", 1.5, 0.7, 0.0, 2.9, 3.0)
