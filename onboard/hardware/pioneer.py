@@ -483,8 +483,11 @@ def handshake(port: serial.SerialBase, config: PioneerConfig,
                 time.sleep(config.stale_session_wait_ms / 1000.0)
                 break
             if reply.id != _SYNCS[step]:
-                step = 0  # out of step: start again at SYNC0, as ARIA does
-                continue
+                # out of step: start again at SYNC0, as ARIA does, but as a new attempt: a device that
+                # answers everything with some other packet once kept this loop going for good
+                log.info("Pioneer on %s: packet 0x%02x in reply to SYNC%d (attempt %d)", config.port, reply.id,
+                         step, attempt + 1)
+                break
             if step == 2:
                 try:
                     return arcos.parse_sync2(reply.payload)

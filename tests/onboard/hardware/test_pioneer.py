@@ -80,6 +80,37 @@ def test_probe_of_a_silent_port_is_a_device_fault(emulator):
         probe(emulator.path, timeout_ms=100)
 
 
+def test_a_device_answering_sync_with_other_packets_is_given_up_on(tmp_path):
+    """Every write gets a CONFIG packet back (0x20), never the SYNC echo: the handshake used to start
+    again at SYNC0 within one attempt, for ever; now each restart is an attempt, and probe gives up."""
+    import os
+
+    master, slave = os.openpty()
+    answering = threading.Event()
+
+    def answer() -> None:
+        while not answering.is_set():
+            try:
+                if os.read(master, 256):
+                    os.write(master, arcos.frame(bytes((0x20, 1, 2, 3))))
+            except OSError:  # the test closed the pty
+                return
+
+    responder = threading.Thread(target=answer, daemon=True)
+    responder.start()
+    outcome: list[BaseException] = []
+    prober = threading.Thread(target=lambda: outcome.append(pytest.raises(DeviceFault, probe, os.ttyname(slave),
+                                                                          timeout_ms=100).value), daemon=True)
+    try:
+        prober.start()
+        prober.join(timeout=20.0)
+        assert not prober.is_alive(), "the handshake never gave up"
+        assert "no ARCOS robot answered" in str(outcome[0])
+    finally:
+        answering.set()
+        os.close(slave)
+        os.close(master)
+
 def test_turn_then_drive_reaches_the_goal(driver, sim_base):
     outcome = driver.move(math.radians(90), 0.3, 0.5, threading.Event())
     assert outcome.status == "done" and outcome.distance_m == pytest.approx(0.3, abs=0.02)
