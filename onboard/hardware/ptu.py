@@ -71,7 +71,7 @@ class PtuLink:
     def transact(self, name: str, value: int | None = None, timeout_s: float | None = None) -> Reply:
         """Send one command and return its answer; a refusal or silence is a :class:`PtuError`."""
         if self._stale:
-            self.flush()
+            self._settle()
             self._stale = False
         self._events.extend(self._read_available(wait=False))  # unprompted events since the last command
         self._drain_unprompted()
@@ -86,6 +86,17 @@ class PtuLink:
 
     def close(self) -> None:
         self._serial.close()
+
+    def _settle(self) -> None:
+        """After an answer that did not come in time: discard what arrives until the line has been quiet
+        for a reply's timeout, then flush. Flushing at once left a late answer on its way, and the next
+        command took it for its own (a pan position read as the tilt's)."""
+        now = time.monotonic()
+        quiet_until, give_up = now + self._reply_timeout_s, now + 5 * self._reply_timeout_s  # not a chatterer
+        while time.monotonic() < min(quiet_until, give_up):
+            if self._read_available():
+                quiet_until = time.monotonic() + self._reply_timeout_s
+        self.flush()
 
     def _await_reply(self, name: str, timeout_s: float) -> Reply:
         deadline = time.monotonic() + timeout_s

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from onboard.emulators.ptu import VERSION, PtuEmulator, PtuModel
-from onboard.hardware.ptu import PtuConfig, PtuPanTilt, probe
-from onboard.hardware.ptu_protocol import PtuError
+from onboard.hardware.ptu import PtuConfig, PtuLink, PtuPanTilt, probe
+from onboard.hardware.ptu_protocol import PtuError, parse_integer
 from shared.limits import PanTiltLimits
 
 RES_DEG = 185.1428 / 3600
@@ -152,6 +152,34 @@ def test_silent_port_is_a_clear_error():
     with pytest.raises(PtuError, match=r"^open: cannot open '/nonexistent/ptu'"):
         PtuPanTilt(PtuConfig(port="/nonexistent/ptu"))
 
+
+def test_an_answer_that_comes_too_late_is_not_taken_for_the_next_commands():
+    master, slave = os.openpty()
+    stop = threading.Event()
+
+    def unit() -> None:  # answers PP (the pan) 0.35 s late, after the driver gave up on it; TP at once
+        while not stop.is_set():
+            try:
+                asked = os.read(master, 64)
+            except OSError:  # the test closed the pty
+                return
+            if asked.startswith(b"PP"):
+                time.sleep(0.35)
+                os.write(master, b"* 1200\r\n")
+            elif asked.startswith(b"TP"):
+                os.write(master, b"* -300\r\n")
+
+    threading.Thread(target=unit, daemon=True).start()
+    link = PtuLink(os.ttyname(slave), 9600, reply_timeout_s=0.2)
+    try:
+        with pytest.raises(PtuError, match="^PP: no answer"):
+            link.transact("PP")
+        assert parse_integer(link.transact("TP"), "TP") == -300  # not the pan's 1200, arriving meanwhile
+    finally:
+        stop.set()
+        link.close()
+        os.close(slave)
+        os.close(master)
 
 def test_probe_reports_the_version(emulator):
     assert probe(emulator.device_path) == {"device": "ptu-d46", "port": emulator.device_path, "version": VERSION}
