@@ -42,7 +42,7 @@ class PtuConfig:
     baud: int = field(default=9600, metadata=bounds(1200, 115_200))  # the unit's power-up rate
     reply_timeout_s: float = field(default=0.5, metadata=bounds(0.01, 10.0))  # one command's answer
     startup_timeout_s: float = field(default=30.0, metadata=bounds(0.1, 120.0))  # self-calibration
-    move_timeout_s: float = field(default=15.0, metadata=bounds(0.5, 120.0))  # a full sweep is ~6 s
+    move_timeout_s: float = field(default=15.0, metadata=bounds(0.5, 120.0))  # beyond the slew the speeds give
     poll_s: float = field(default=0.05, metadata=bounds(0.001, 1.0))  # position polling during a look
 
 
@@ -217,12 +217,15 @@ class PtuPanTilt:
         goal = (self._to_positions(pan_rad, "P"), self._to_positions(tilt_rad, "T"))
         if goal == self._state[:2]:
             return 0.0  # already there: nothing moves, nothing to settle
+        # the slew the speeds give, and the timeout beyond it: a slow head's long sweep is not a failure
+        expected_s = self.limits.slew_time_s(*(math.degrees(positions_to_rad(g - p, self._res[axis]))
+                                                for g, p, axis in zip(goal, self._state[:2], "PT")))
         with self._io:
             self._check_open("look")
             self._link.limit_hits.clear()
             self._link.transact("PP", goal[0])
             self._link.transact("TP", goal[1])
-        deadline = start + self.config.move_timeout_s
+        deadline = start + expected_s + self.config.move_timeout_s
         while True:
             with self._io:
                 self._check_open("look")
@@ -242,7 +245,8 @@ class PtuPanTilt:
                 break
             if time.monotonic() >= deadline:
                 self.halt()
-                raise PtuError("look", f"the head did not reach its goal within {self.config.move_timeout_s:g} s")
+                raise PtuError("look", f"the head did not reach its goal within {expected_s:.2f} s of slewing "
+                                       f"and {self.config.move_timeout_s:g} s more")
             cancel.wait(self.config.poll_s)
         return time.monotonic() - start
 

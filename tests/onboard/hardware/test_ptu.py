@@ -100,9 +100,22 @@ def test_a_refused_command_names_it(emulator):
 def test_move_timeout_halts_and_names_the_look(emulator):
     head = PtuPanTilt(config(emulator, move_timeout_s=0.5))
     try:
-        with pytest.raises(PtuError, match=r"^look: the head did not reach its goal within 0.5 s"):
+        with emulator._lock:  # the pan axis jams: it creeps at 1 position a second, whatever the speed set
+            emulator.machine.pan.speed = 1.0
+        with pytest.raises(PtuError, match=r"^look: the head did not reach its goal within \d+\.\d+ s of slewing "
+                                           r"and 0.5 s more"):
             head.look(math.radians(150.0), 0.0, threading.Event())
         assert not emulator.reading().moving
+    finally:
+        head.close()
+
+
+def test_a_slow_heads_long_sweep_is_given_its_slewing_time(emulator):
+    slow = PanTiltLimits(pan_speed_deg_s=40.0, tilt_speed_deg_s=40.0)  # 100° take 2.5 s, the timeout 0.5 s
+    head = PtuPanTilt(config(emulator, move_timeout_s=0.5), slow)
+    try:
+        took = head.look(math.radians(100.0), 0.0, threading.Event())
+        assert took > 2.0 and head.reading().pan_rad == pytest.approx(math.radians(100.0), abs=math.radians(0.1))
     finally:
         head.close()
 
