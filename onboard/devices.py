@@ -6,6 +6,7 @@ Angles are radians here; the wire (degrees) is the agent's business.
 
 from __future__ import annotations
 
+import logging
 import threading
 from dataclasses import dataclass
 from typing import Literal, Protocol
@@ -14,6 +15,8 @@ import numpy as np
 
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 from shared.limits import BaseLimits, PanTiltLimits
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -119,6 +122,15 @@ class Devices:
     camera: StereoCamera
 
     def close(self) -> None:
-        """Base first: a moving robot is the only dangerous thing here."""
+        """Base first: a moving robot is the only dangerous thing here. Each is closed whatever the
+        others do (a base whose port died must not leave the head slewing and the camera held); the
+        first failure is raised once all have been tried."""
+        failures = []
         for device in (self.base, self.pantilt, self.camera):
-            device.close()
+            try:
+                device.close()
+            except Exception as exc:
+                log.exception("closing the %s failed", type(device).__name__)
+                failures.append(exc)
+        if failures:
+            raise failures[0]

@@ -220,3 +220,22 @@ def _move_or_fault(devices: Devices) -> str:
         return devices.base.move(0.0, 3.0, 0.3, threading.Event()).status
     except DeviceFault:
         return "fault"
+
+
+def test_closing_goes_on_past_a_device_that_fails_to_close(caplog):
+    closed = []
+
+    class Part:
+        def __init__(self, name: str, fails: bool = False):
+            self.name, self.fails = name, fails
+
+        def close(self) -> None:
+            closed.append(self.name)
+            if self.fails:
+                raise OSError(f"{self.name}: the port is gone")
+
+    devices = Devices("hardware", None, Part("base", fails=True), Part("pantilt"), Part("camera"))
+    with pytest.raises(OSError, match="base: the port is gone"):
+        devices.close()
+    assert closed == ["base", "pantilt", "camera"]  # the head and the camera are still let go
+    assert "closing the Part failed" in caplog.text
