@@ -101,7 +101,12 @@ def run_agent(argv: list[str]) -> int:
 
     route_zenoh_log()  # refused TLS peers and access-control drops: only Zenoh sees them
     warn_if_exposed(transport.zenoh())
-    session = transport.open()
+    try:
+        session = transport.open()
+    except Exception as exc:  # zenoh.ZError: the agent would have closed the devices; it never ran
+        robot.devices.close()
+        log.error("cannot open the Zenoh session: %s", exc)
+        return 1
     try:
         agent = Agent(config, robot.devices, session, transport.robot_id, sim=robot.sim)
         agent.run(stop)

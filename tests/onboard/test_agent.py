@@ -325,3 +325,10 @@ def test_a_slow_move_in_real_time_is_waited_for_and_an_absurd_one_refused_by_nam
         for absurd in (math.inf, math.nan):
             with pytest.raises(CommandError, match="distance_m"):
                 robot.move(distance_m=absurd)
+
+
+def test_an_agent_whose_session_cannot_open_says_so_and_exits():
+    done = subprocess.run([sys.executable, "-m", "onboard.cli", "--backend", "sim", "--listen", "tcp/256.1.1.1:7447",
+                           "--no-multicast-scouting"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1 and "cannot open the Zenoh session" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr
