@@ -312,12 +312,16 @@ def run_calibrate_stereo(argv: list[str]) -> int:
     parser.add_argument("--square-mm", type=float, required=True, metavar="S", help="a square's side")
     parser.add_argument("--out", type=Path, required=True, metavar="FILE.yaml")
     parser.add_argument("--max-rms-px", type=float, default=1.0, help="refuse a calibration worse than this")
+    parser.add_argument("--swap-halves", action="store_true",
+                        help="side-by-side frames hold the right image in their left half ([hardware.camera] "
+                             "swap_halves must say so too)")
     args = parser.parse_args(argv)
     _setup_logging(False)
     from onboard.hardware.stereo_calibration import CalibrationError, calibrate_stereo
 
     try:
-        summary = calibrate_stereo(args.images, args.board, args.square_mm, args.out, max_rms_px=args.max_rms_px)
+        summary = calibrate_stereo(args.images, args.board, args.square_mm, args.out, max_rms_px=args.max_rms_px,
+                                   swap_halves=args.swap_halves)
     except CalibrationError as exc:
         log.error("calibrate-stereo: %s", exc)
         return 2

@@ -69,20 +69,23 @@ def parse_board(text: str) -> tuple[int, int]:
 
 
 def calibrate_stereo(images: str | Path, board: str, square_mm: float, out: str | Path,
-                     max_rms_px: float = 1.0, min_pairs: int = 5) -> dict:
+                     max_rms_px: float = 1.0, min_pairs: int = 5, swap_halves: bool = False) -> dict:
     """The ``calibrate-stereo`` command: calibrate, write ``out``, return the summary to print."""
-    result = calibrate(images, parse_board(board), square_mm, max_rms_px=max_rms_px, min_pairs=min_pairs)
+    result = calibrate(images, parse_board(board), square_mm, max_rms_px=max_rms_px, min_pairs=min_pairs,
+                       swap_halves=swap_halves)
     result.rig.save(out, result.rms_px)
     log.info("stereo calibration written to %s: %s", out, result.summary())
     return {**result.summary(), "out": str(out)}
 
 
 def calibrate(images_dir: str | Path, board: tuple[int, int], square_mm: float, *,
-              max_rms_px: float = 1.0, min_pairs: int = 5) -> CalibrationResult:
-    """Calibrate a stereo rig from chessboard pairs; raises :class:`CalibrationError` for a bad set."""
+              max_rms_px: float = 1.0, min_pairs: int = 5, swap_halves: bool = False) -> CalibrationResult:
+    """Calibrate a stereo rig from chessboard pairs; raises :class:`CalibrationError` for a bad set.
+    ``swap_halves``: side-by-side frames hold the right image in their left half (the camera's
+    ``swap_halves``, which must agree, or the driver rectifies each half with the other's maps)."""
     if not square_mm > 0:
         raise CalibrationError(f"--square-mm {square_mm!r}: a square's side must be positive")
-    pairs = load_pairs(Path(images_dir))
+    pairs = load_pairs(Path(images_dir), swap_halves)
     found, skipped, missing = _detect(pairs, board)
     if len(found) < min_pairs:
         raise CalibrationError(_too_few(board, len(found), len(pairs), min_pairs, missing, pairs))
@@ -101,11 +104,14 @@ def calibrate(images_dir: str | Path, board: tuple[int, int], square_mm: float, 
     if not rms <= max_rms_px:
         raise CalibrationError(f"RMS reprojection error {rms:.3f} px exceeds {max_rms_px:g} px: blurred or "
                                "moving pictures, a board that is not flat, or a wrong --board/--square-mm")
+    if t[0, 0] >= 0:  # T takes left-camera points to the right camera's frame: x falls by the baseline
+        raise CalibrationError(f"the right camera came out {t[0, 0]:.3f} m to the left of the left one: the "
+                               "images are swapped (side-by-side frames: give --swap-halves)")
     rig = StereoRig((int(size[0]), int(size[1])), k1, d1, k2, d2, r, t)
     return CalibrationResult(rig, float(rms), len(found), tuple(skipped))
 
 
-def load_pairs(folder: Path) -> list[ImagePair]:
+def load_pairs(folder: Path, swap_halves: bool = False) -> list[ImagePair]:
     """The folder's pairs (see the module's docstring), as grey images of one size."""
     if not folder.is_dir():
         raise CalibrationError(f"{folder}: no such folder of calibration pictures")
@@ -120,7 +126,7 @@ def load_pairs(folder: Path) -> list[ImagePair]:
         pairs = [ImagePair(f"{lefts[k].name} + {rights[k].name}", _grey(lefts[k]), _grey(rights[k]),
                            (lefts[k].name, rights[k].name)) for k in sorted(lefts)]
     else:
-        pairs = [_split(p) for p in files]
+        pairs = [_split(p, swap_halves) for p in files]
     if not pairs:
         raise CalibrationError(f"{folder}: no left_*.png/right_*.png pairs nor side-by-side pictures")
     _check_sizes(pairs)
@@ -134,12 +140,13 @@ def _grey(path: Path) -> np.ndarray:
     return image
 
 
-def _split(path: Path) -> ImagePair:
+def _split(path: Path, swap_halves: bool) -> ImagePair:
     image = _grey(path)
     if image.shape[1] % 2:
         raise CalibrationError(f"{path.name}: a side-by-side picture needs an even width (got {image.shape[1]} px)")
     half = image.shape[1] // 2
-    return ImagePair(path.name, image[:, :half], image[:, half:], (path.name, path.name))
+    first, second = image[:, :half], image[:, half:]
+    return ImagePair(path.name, *((second, first) if swap_halves else (first, second)), (path.name, path.name))
 
 
 def _check_sizes(pairs: list[ImagePair]) -> None:
@@ -164,11 +171,12 @@ def _detect(pairs: list[ImagePair], board: tuple[int, int]):
     found, skipped, missing = [], [], []
     for pair in pairs:
         corners = [_find(image, board) for image in (pair.left, pair.right)]
-        absent = [source for c, source in zip(corners, pair.sources) if c is None]
+        one_file = pair.sources[0] == pair.sources[1]  # side by side: say which image
+        absent = [f"{source} ({side} image)" if one_file else source
+                  for c, source, side in zip(corners, pair.sources, ("left", "right")) if c is None]
         if absent:
             skipped.append(pair.name)
-            missing += [f"{s} (right half)" if pair.sources[0] == pair.sources[1] and i else s
-                        for i, s in enumerate(absent)]
+            missing += absent
         else:
             found.append(corners)
     return found, skipped, missing

@@ -113,6 +113,9 @@ def load_rig(path: Path | str) -> StereoRig:
         values |= {key: _distortion(storage, key, path) for key in _DISTORTIONS}
     finally:
         storage.release()
+    if values["T"][0, 0] >= 0:  # the right camera left of the left one: depth would come out negative
+        raise CalibrationFileError(f"{path}: T puts the right camera {values['T'][0, 0]:g} m to the left of the "
+                                   "left one (left and right swapped when it was made?)")
     return StereoRig(size, values["K1"], values["D1"], values["K2"], values["D2"], values["R"], values["T"])
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -13,7 +14,7 @@ import pytest
 
 from onboard.config import CameraConfig
 from onboard.hardware.stereo_calibration import CalibrationError, calibrate, calibrate_stereo, parse_board
-from onboard.hardware.stereo_rig import load_rig
+from onboard.hardware.stereo_rig import CalibrationFileError, load_rig
 from onboard.hardware.uvc_camera import UvcStereoCamera, UvcStereoConfig
 from onboard.sim.chessboard_views import DEFAULT_VIEWS, render_chessboard_views
 
@@ -91,6 +92,40 @@ def test_side_by_side_pictures_and_rectified_rows(views, tmp_path):
     assert max(rectified_offsets) < 0.7  # ...and is gone after it
     assert camera.mount.baseline_m == pytest.approx(sim.baseline_m, rel=0.02)
 
+
+def _side_by_side(views, tmp_path, count: int, swapped: bool = False, blank_right: tuple[int, ...] = ()):
+    folder = tmp_path / ("swapped" if swapped else "sbs")
+    folder.mkdir()
+    for i in range(count):
+        left, right = (cv2.imread(str(views / f"{side}_{i:02d}.png")) for side in ("left", "right"))
+        right = np.full_like(right, 128) if i in blank_right else right
+        cv2.imwrite(str(folder / f"frame_{i:02d}.png"), cv2.hconcat([right, left] if swapped else [left, right]))
+    return folder
+
+
+def test_side_by_side_frames_with_the_halves_swapped_are_refused_unless_said_so(views, tmp_path):
+    folder = _side_by_side(views, tmp_path, 6, swapped=True)
+    with pytest.raises(CalibrationError, match=r"right camera came out 0\.1\d+ m to the left .* --swap-halves"):
+        calibrate(folder, BOARD, SQUARE_MM)
+    out = tmp_path / "swapped.yaml"
+    calibrate_stereo(folder, "9x6", SQUARE_MM, out, swap_halves=True)
+    assert load_rig(out).translation_m[0, 0] == pytest.approx(-CameraConfig().baseline_m, rel=0.02)
+
+
+def test_a_file_with_the_cameras_swapped_is_refused_by_name(views, tmp_path):
+    out = tmp_path / "good.yaml"
+    calibrate_stereo(_side_by_side(views, tmp_path, 6), "9x6", SQUARE_MM, out)
+    rig = load_rig(out)
+    swapped = tmp_path / "swapped.yaml"
+    dataclasses.replace(rig, translation_m=-rig.translation_m).save(swapped, 0.1)  # the cameras traded places
+    with pytest.raises(CalibrationFileError, match="swapped.yaml: T puts the right camera .* to the left"):
+        load_rig(swapped)
+
+
+def test_a_side_by_side_frame_without_the_board_in_one_half_names_that_image(views, tmp_path):
+    folder = _side_by_side(views, tmp_path, 4, blank_right=(3,))
+    with pytest.raises(CalibrationError, match=r"not found in: frame_03.png \(right image\)"):
+        calibrate(folder, BOARD, SQUARE_MM)
 
 def test_too_few_pairs_names_the_pictures_without_the_board(views, tmp_path):
     folder = copy_of(views, tmp_path, {f"{side}_{i:02d}.png" for side in ("left", "right") for i in range(3)})
