@@ -64,7 +64,10 @@ class PtuLink:
         self.limit_hits: list[str] = []  # axes that reported !P / !T since last cleared
 
     def flush(self) -> None:
-        self._serial.reset_input_buffer()
+        try:
+            self._serial.reset_input_buffer()
+        except (serial.SerialException, OSError) as exc:  # as every other I/O here: a PtuError naming the port
+            raise PtuError("flush", f"cannot flush {self.port}: {exc}") from exc
         self._tokenizer.reset()
         self._events.clear()
 

@@ -194,5 +194,11 @@ def test_an_answer_that_comes_too_late_is_not_taken_for_the_next_commands():
         os.close(slave)
         os.close(master)
 
+def test_a_port_gone_under_a_flush_is_a_ptu_error_naming_it():
+    link = PtuLink("loop://", 9600, reply_timeout_s=0.2)
+    link.close()  # as when the USB adapter is pulled: pyserial raises its own error, not the driver's
+    with pytest.raises(PtuError, match="^flush: cannot flush loop://"):
+        link.flush()
+
 def test_probe_reports_the_version(emulator):
     assert probe(emulator.device_path) == {"device": "ptu-d46", "port": emulator.device_path, "version": VERSION}
