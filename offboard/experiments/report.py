@@ -412,10 +412,15 @@ def scenario_mean(values: dict[tuple, float]) -> float:
     """The mean of per-run values keyed by placement (:func:`placement`), each scenario counted once,
     its seeds averaged: as :func:`paired_stderr` counts them, so that a difference of two such means is
     the one its standard error is of, even where scenarios ran with different numbers of seeds."""
+    return statistics.fmean(_per_scenario(values))
+
+
+def _per_scenario(values: dict[tuple, float]) -> list[float]:
+    """Per scenario (a placement without its seed), the mean over its seeds."""
     seeds: dict[tuple, list[float]] = {}
     for key, value in values.items():
         seeds.setdefault(key[:-1], []).append(value)
-    return statistics.fmean(statistics.fmean(v) for v in seeds.values())
+    return [statistics.fmean(v) for v in seeds.values()]
 
 
 def paired_stderr(diffs: dict[tuple, float]) -> float | None:
@@ -424,10 +429,7 @@ def paired_stderr(diffs: dict[tuple, float]) -> float | None:
     almost exactly (the same room, start and target; only the sensors' noise differs), so seeds are
     not independent samples, and counting them as such understates the error (on `test`, 120 runs of
     40 scenarios: 0.038 where it is 0.063). None below two scenarios."""
-    seeds: dict[tuple, list[float]] = {}
-    for key, difference in diffs.items():
-        seeds.setdefault(key[:-1], []).append(difference)
-    means = [statistics.fmean(v) for v in seeds.values()]
+    means = _per_scenario(diffs)
     return statistics.stdev(means) / math.sqrt(len(means)) if len(means) > 1 else None
 
 
