@@ -228,6 +228,9 @@ class Search:
                 self._look(decision)
             if self.on_action:
                 self.on_action(self)
+        # planning that no look followed: the decision to stop, a move that found the target on the way
+        self.state.processing_s += self._pending_processing_s
+        self._pending_processing_s = 0.0
         self.wall_time_s = time.monotonic() - started
         return self.state
 
@@ -314,9 +317,6 @@ class Search:
             self._look(decision)  # the look the move was chosen for
         elif result.status == "interrupted":  # a glance saw the target: decide again from here
             self.state.positions.append((result.pose.x_m, result.pose.y_m))
-            if self.state.found:  # no look follows to book the move's planning time
-                self.state.processing_s += self._pending_processing_s
-                self._pending_processing_s = 0.0
         else:
             self.state.unreachable.append(tuple(goal))
             log.warning("position (%.1f, %.1f) not reached: %s (%s)", goal[0], goal[1], result.status, result.reason)

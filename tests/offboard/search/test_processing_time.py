@@ -1,5 +1,6 @@
 """A look's processing time, as the planner's t(f) and the report count it, holds all of the look's
-work: here, the dynamic priors' update after it (it once fell outside the clock)."""
+work: here, the dynamic priors' update after it (it once fell outside the clock); and the search's,
+the planning that no look followed."""
 
 from __future__ import annotations
 
@@ -29,3 +30,18 @@ def test_a_look_s_processing_counts_the_dynamic_priors_update(sim_agent):
     looks = [look["processing_s"] for look in search.state.look_log]
     assert sum(looks) == pytest.approx(search.state.processing_s, abs=1e-3)
     assert looks[2] - looks[1] >= 0.8 * PRIOR_S, looks
+
+
+def test_the_planning_of_the_decision_to_stop_is_counted(sim_agent):
+    search = search_on(sim_agent[1])
+
+    class SlowToStop:  # a policy that deliberates, then gives up
+        def decide(self, *args, **kwargs) -> Decision:
+            time.sleep(PRIOR_S)
+            return Decision("stop", "nothing worth a look", status="exhausted")
+
+    search.policy = SlowToStop()
+    search._plans_positions = False  # no widening: the stop stands
+    state = search.run()
+    assert state.status == "exhausted" and state.actions == 0
+    assert state.processing_s >= 0.9 * PRIOR_S * len(state.planning_ms), (state.processing_s, state.planning_ms)
