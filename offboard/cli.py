@@ -94,13 +94,13 @@ def _resume(args: argparse.Namespace) -> int:
     from offboard.search.checkpoint import CheckpointError, read
     from offboard.search.run import run_search
 
+    given = transport_from_args(args)
     try:
         checkpoint = read(args.resume)
-    except CheckpointError as exc:
+        summary = run_search(checkpoint.transport if given == TransportConfig() else given, checkpoint.request,
+                             resume=checkpoint)
+    except CheckpointError as exc:  # read, or restored into the search before the robot moves
         raise SystemExit(f"syt-offboard search --resume: {exc}") from None
-    given = transport_from_args(args)
-    summary = run_search(checkpoint.transport if given == TransportConfig() else given, checkpoint.request,
-                         resume=checkpoint)
     sys.stdout.write(json.dumps(summary) + "\n")
     return 0 if summary["found"] else 3
 

@@ -24,6 +24,7 @@ a few MB after a few looks.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import logging
@@ -68,14 +69,16 @@ class Checkpoint:
     @property
     def request(self) -> SearchRequest:
         """The request, with ``out_dir`` the checkpoint's folder (wherever it was moved)."""
-        return dataclasses.replace(request_from_plain(self.header["request"]), out_dir=self.path.parent)
+        with _damaged(self.path, "request"):
+            return dataclasses.replace(request_from_plain(self.header["request"]), out_dir=self.path.parent)
 
     @property
     def transport(self) -> TransportConfig:
-        plain = dict(self.header["transport"])
-        zenoh_config = plain.pop("zenoh_config")
-        return TransportConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in plain.items()},
-                               zenoh_config=None if zenoh_config is None else Path(zenoh_config))
+        with _damaged(self.path, "transport"):
+            plain = dict(self.header["transport"])
+            zenoh_config = plain.pop("zenoh_config")
+            return TransportConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in plain.items()},
+                                   zenoh_config=None if zenoh_config is None else Path(zenoh_config))
 
     @property
     def config(self) -> SearchConfig:
@@ -91,6 +94,19 @@ class Checkpoint:
     @property
     def actions(self) -> int:
         return int(self.header["search"]["state"]["actions"])
+
+
+@contextlib.contextmanager
+def _damaged(path: Path, part: str):
+    """A checkpoint whose ``part`` is not as this syt writes it (hand-edited, or from another
+    version) raises whatever Python raises on the first odd field: name the file and the part."""
+    try:
+        yield
+    except CheckpointError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        problem = f"missing {exc}" if isinstance(exc, KeyError) else f"{type(exc).__name__}: {exc}"
+        raise CheckpointError(f"{path}: {part}", None, f"damaged or from another version ({problem})") from None
 
 
 class Checkpointer:
@@ -190,36 +206,35 @@ def _decoded(checkpoint: Checkpoint, name: str, shape: list[int], dtype: str) ->
 def decode_maps(checkpoint: Checkpoint) -> tuple[dict, np.ndarray, np.ndarray]:
     """The belief state, log-odds and observed mask that :func:`encode_maps` was given."""
     h, a = checkpoint.header, checkpoint.arrays
-    try:
+    with _damaged(checkpoint.path, "maps"):
         mass, odds = (_decoded(checkpoint, name, shape, dtype) for name, (shape, dtype) in h["coded"].items())
-    except ValueError as exc:
-        raise CheckpointError(str(checkpoint.path), None, f"damaged map: {exc}") from None
-    shape = tuple(h["grid_shape"])
-    seen_empty, observed = (np.unpackbits(a[name], count=int(np.prod(shape))).astype(bool).reshape(shape)
-                            for name in ("belief.seen_empty", "occupancy.observed"))
-    blocked = np.unpackbits(a["belief.facing_blocked"], count=mass.size).astype(bool).reshape(mass.shape)
-    return ({**h["belief"], "mass": mass, "coarse": a["belief.coarse"], "seen_empty": seen_empty,
-             "facing_blocked": blocked}, odds, observed)
+        shape = tuple(h["grid_shape"])
+        seen_empty, observed = (np.unpackbits(a[name], count=int(np.prod(shape))).astype(bool).reshape(shape)
+                                for name in ("belief.seen_empty", "occupancy.observed"))
+        blocked = np.unpackbits(a["belief.facing_blocked"], count=mass.size).astype(bool).reshape(mass.shape)
+        return ({**h["belief"], "mass": mass, "coarse": a["belief.coarse"], "seen_empty": seen_empty,
+                 "facing_blocked": blocked}, odds, observed)
 
 
 def restore(search: Search, checkpoint: Checkpoint) -> None:
     """Put a freshly built search (same request, same robot) back where the checkpoint left it."""
     if search.config != checkpoint.config:
         raise CheckpointError(str(checkpoint.path), None, "the search's configuration is not the checkpoint's")
-    part = checkpoint.header["search"]
     belief, odds, observed = decode_maps(checkpoint)
-    try:
+    with _damaged(checkpoint.path, "search"):  # read all of it before the search is changed
+        part = checkpoint.header["search"]
+        glanced = [_view(g) for g in part.get("glanced", [])]  # none in a checkpoint from before session 48
+        state = state_from_plain(part["state"])
+        clock_start_s, pending_s, planner_s = (float(part[k]) for k in ("clock_start_s", "pending_processing_s",
+                                                                         "planner_processing_s"))
         search.belief.restore(belief)
         with search.occupancy.edit() as (log_odds, was_observed):
             log_odds[:], was_observed[:] = odds, observed
         search.tracker.restore(part["tracker"])
-        glanced = [_view(g) for g in part.get("glanced", [])]  # none in a checkpoint from before session 48
-    except (ValueError, KeyError) as exc:
-        raise CheckpointError(str(checkpoint.path), None, f"does not fit this search: {exc}") from None
-    search.state = state_from_plain(part["state"])
-    search._clock_start_s = float(part["clock_start_s"])
-    search._pending_processing_s = float(part["pending_processing_s"])
-    search.planner.set_processing_s(float(part["planner_processing_s"]))
+    search.state = state
+    search._clock_start_s = clock_start_s
+    search._pending_processing_s = pending_s
+    search.planner.set_processing_s(planner_s)
     search._glanced = glanced
     if search.state.widened:
         search.planner.widen()
@@ -239,10 +254,8 @@ def _restore_priors(search: Search, checkpoint: Checkpoint) -> None:
         if name not in saved:
             raise CheckpointError(f"{checkpoint.path}: search.priors.{name}", None,
                                   "the checkpoint has no memory for this search's dynamic prior")
-        try:
+        with _damaged(checkpoint.path, f"search.priors.{name}"):
             prior.source.restore(_decoded(checkpoint, name, *saved[name]))
-        except (ValueError, KeyError) as exc:
-            raise CheckpointError(f"{checkpoint.path}: {name}", None, f"damaged prior memory: {exc}") from None
 
 
 _STATE_FIELDS = {
@@ -370,12 +383,13 @@ def read(folder: Path) -> Checkpoint:
     start = _aligned(len(MAGIC) + 8 + length)
     arrays = {}
     for name, entry in header.pop("arrays").items():
-        dtype, shape = np.dtype(entry["dtype"]), tuple(entry["shape"])
-        count = int(np.prod(shape, dtype=np.int64))
-        begin = start + entry["offset"]
-        if begin + count * dtype.itemsize > len(data):
-            raise CheckpointError(f"{path}: {name}", len(data), "the file ends before this array")
-        arrays[name] = np.frombuffer(data, dtype, count, begin).reshape(shape)
+        with _damaged(path, f"arrays.{name}"):
+            dtype, shape = np.dtype(entry["dtype"]), tuple(entry["shape"])
+            count = int(np.prod(shape, dtype=np.int64))
+            begin = start + entry["offset"]
+            if begin + count * dtype.itemsize > len(data):
+                raise CheckpointError(f"{path}: {name}", len(data), "the file ends before this array")
+            arrays[name] = np.frombuffer(data, dtype, count, begin).reshape(shape)
     return Checkpoint(path, header, arrays)
 
 

@@ -159,6 +159,26 @@ def test_damaged_checkpoints_are_refused_naming_the_problem(tmp_path):
     assert not list(tmp_path.glob(".*.tmp"))  # the atomic write left no temporary behind
 
 
+def test_a_checkpoint_with_a_part_missing_or_mistyped_is_refused_naming_the_part(tmp_path):
+    """Hand-edited, or from another version: each once escaped as a bare KeyError or TypeError."""
+    belief, occupancy = _looked_at(4)
+    header, arrays = checkpoint.encode_maps(belief.state(), occupancy.log_odds, occupancy.observed)
+    header.update(request={}, transport={}, config={}, wall_time_s=0.0, search={})
+    path = tmp_path / checkpoint.FILE_NAME
+    short = {k: v for k, v in arrays.items() if k != "belief.mass.flags"}
+    checkpoint.write_file(path, header, short)
+    read = checkpoint.read(tmp_path)
+    with pytest.raises(CheckpointError, match=r"maps: .*missing 'belief.mass.flags'"):
+        checkpoint.decode_maps(read)
+    with pytest.raises(CheckpointError, match=r"transport: .*missing 'zenoh_config'"):
+        read.transport
+    checkpoint.write_file(path, header, arrays)
+    data = path.read_bytes()
+    dtype = json.dumps(arrays["belief.coarse"].dtype.str).encode()  # "<f8": three characters
+    path.write_bytes(data.replace(b'"dtype": ' + dtype, b'"dtype": "zzz"', 1))  # one numpy has not, as long
+    with pytest.raises(CheckpointError, match=r"arrays\.belief\.\w+: .*TypeError"):
+        checkpoint.read(tmp_path)
+
 def test_the_command_line_says_what_is_missing(tmp_path):
     from offboard.cli import main
 
