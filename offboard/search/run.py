@@ -143,12 +143,12 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
     root = logging.getLogger()
     root.addHandler(file_log)
     recorder = None
-    if request.record or request.spawn or request.viewer_url:
-        rrd = "search.rrd" if resume is None else f"search-resumed-{resume.actions}.rrd"
-        recorder = Recorder(out / rrd if request.record else None, spawn=request.spawn,
-                            connect_url=request.viewer_url)
-        recorder.attach_logging(root)
-    try:
+    try:  # from here on the log handler is ours to remove, whatever fails (a viewer that will not start)
+        if request.record or request.spawn or request.viewer_url:
+            rrd = "search.rrd" if resume is None else f"search-resumed-{resume.actions}.rrd"
+            recorder = Recorder(out / rrd if request.record else None, spawn=request.spawn,
+                                connect_url=request.viewer_url)
+            recorder.attach_logging(root)
         config = search_config(request) if resume is None else resume.config
         model = TargetModel.from_files(request.pictures, request.target_size_m)
         with transport.open() as session, RobotClient(session, transport.robot_id) as robot:

@@ -173,6 +173,19 @@ def test_a_configuration_file_keeps_the_values_no_option_overrides(tmp_path):
     assert (report.planner.move_rule, report.planner.move_threshold) == ("threshold", 0.2)
 
 
+def test_a_recording_that_cannot_start_leaves_no_log_handler_behind(tmp_path):
+    import logging
+
+    from offboard.search.run import SearchRequest, run_search
+
+    (tmp_path / "search.rrd").mkdir()  # the recording's file cannot be made
+    request = SearchRequest(pictures=(Path("t.png"),), target_size_m=(0.23, 0.23, 0.23), out_dir=tmp_path, record=True)
+    before = list(logging.getLogger().handlers)
+    with pytest.raises(RuntimeError, match="search.rrd"):
+        run_search(TransportConfig(connect=("tcp/127.0.0.1:9",), multicast_scouting=False), request)
+    assert logging.getLogger().handlers == before  # a later search in this process logs only to its own file
+
+
 @pytest.mark.parametrize("room, problem", [
     ("1e5,1e5,3", "room_m: each side must be 0.5 to 100 m"),  # once allocated until the machine gave out
     ("40,40,4", "room_m: 51,200,000 cubes of 0.05 m, more than 20,000,000: give a coarser resolution_m"),
