@@ -43,6 +43,7 @@ from shared.geometry import HeadMount, Intrinsics, Pose2D, wrap_angle
 log = logging.getLogger(__name__)
 
 _NO_INFORMATION = 1e4  # variance (m², rad²) along an axis the match does not constrain
+_STILL_M = 0.01  # a displacement this small between two odometry readings is jitter, not travel
 
 
 @dataclass(frozen=True)
@@ -379,7 +380,9 @@ class PoseTracker:
         fy = -s * (odom.x_m - prev.x_m) + c * (odom.y_m - prev.y_m)
         distance = math.hypot(fx, fy)
         reverse = fx < 0.0  # backing off: the base did not turn round first
-        turn_in = math.atan2(-fy, -fx) if reverse else math.atan2(fy, fx) if distance > 1e-6 else 0.0
+        # under a centimetre the displacement is odometry's jitter: its direction is no turn the base made
+        travelled = distance > _STILL_M
+        turn_in = (math.atan2(-fy, -fx) if reverse else math.atan2(fy, fx)) if travelled else 0.0
         turn_out = wrap_angle(odom.heading_rad - prev.heading_rad - turn_in)
         direction = self.pose.heading_rad + turn_in + (math.pi if reverse else 0.0)
         self.covariance = _propagate(self.covariance, direction, distance, turn_in, turn_out, self.model)

@@ -250,6 +250,15 @@ def test_backing_off_is_not_a_half_turn():
     assert math.degrees(math.sqrt(tracker.covariance[2, 2])) < 1.0
 
 
+@pytest.mark.parametrize("jitter", [(-1e-7, 1e-7), (-0.002, 0.002), (0.002, 0.002)])
+def test_odometry_jitter_in_place_adds_no_turn(jitter):
+    """A base standing still (a look, an in-place turn) reads a millimetre or two off: that has no
+    direction the base turned to, and once cost 1.9° of heading σ each time, backwards or forwards."""
+    tracker = PoseTracker(Pose2D(1.0, 1.0, 0.0))
+    before = math.sqrt(tracker.covariance[2, 2])
+    tracker.predict(Pose2D(1.0 + jitter[0], 1.0 + jitter[1], 0.0))
+    assert math.degrees(math.sqrt(tracker.covariance[2, 2]) - before) < 0.05
+
 def test_an_unmapped_object_is_not_slid_onto_a_wall():
     """Early in a run the map holds the walls only. A far, compact patch of an object it does not
     hold yet, 0.6 m in front of a wall and off to the side, fits that wall by turning the robot ~7°:
