@@ -307,7 +307,8 @@ class Search:
         self.state.motion_s += motion_s
         self.state.processing_s += processing_s
         self.state.driving_s += motion_s + (0.0 if self.config.planned_processing_s else processing_s)
-        self.state.moved()
+        if result.distance_m >= self.config.planner.same_position_m:  # a move that went nowhere changes no view
+            self.state.moved()
         self.state.distance_m += result.distance_m
         self.measure_driving()
         self.state.trail.append((result.pose.x_m, result.pose.y_m))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from offboard.search.loop import SearchState, same_view
 from shared.geometry import HeadMount, Pose2D
 
@@ -42,3 +44,16 @@ def test_a_glance_repeats_a_view_only_from_the_same_camera_pose_and_direction():
     assert not same_view(here, mount.camera_in_world(Pose2D(2.0, 3.0, 0.5), math.radians(5.0), math.radians(-25.0)))
     assert not same_view(here, mount.camera_in_world(Pose2D(2.0, 3.0, 0.5), 0.0, math.radians(-20.0)))
     assert not same_view(here, mount.camera_in_world(Pose2D(2.1, 3.0, 0.5), 0.0, math.radians(-25.0)))
+
+
+@pytest.mark.integration
+def test_a_move_that_went_nowhere_keeps_a_detection_from_being_confirmed_by_the_same_image(lab_search):
+    """A look with a located detection may be taken once more, to confirm it; a move that ends
+    unreachable without driving once cleared that, so the same view counted again and again."""
+    from offboard.planning.planner import Decision
+
+    pose = lab_search._pose()
+    lab_search.state.took(5, located=True, at_m=(pose.x_m, pose.y_m))
+    lab_search._move(Decision("move", "a goal inside the wall", position_m=(-5.0, -5.0), setting=0))
+    assert lab_search.state.unreachable and lab_search.state.distance_m < 0.05
+    assert 5 in lab_search.state.retaken  # its confirmation is still the one it had
