@@ -104,10 +104,10 @@ def calibrate(images_dir: str | Path, board: tuple[int, int], square_mm: float, 
     if not rms <= max_rms_px:
         raise CalibrationError(f"RMS reprojection error {rms:.3f} px exceeds {max_rms_px:g} px: blurred or "
                                "moving pictures, a board that is not flat, or a wrong --board/--square-mm")
-    if t[0, 0] >= 0:  # T takes left-camera points to the right camera's frame: x falls by the baseline
+    rig = StereoRig((int(size[0]), int(size[1])), k1, d1, k2, d2, r, t)
+    if rig.swapped:
         raise CalibrationError(f"the right camera came out {t[0, 0]:.3f} m to the left of the left one: the "
                                "images are swapped (side-by-side frames: give --swap-halves)")
-    rig = StereoRig((int(size[0]), int(size[1])), k1, d1, k2, d2, r, t)
     return CalibrationResult(rig, float(rms), len(found), tuple(skipped))
 
 

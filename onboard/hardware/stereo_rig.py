@@ -46,6 +46,12 @@ class StereoRig:
     def baseline_m(self) -> float:
         return float(np.linalg.norm(self.translation_m))
 
+    @property
+    def swapped(self) -> bool:
+        """The right camera left of the left one: T takes left-camera points into the right camera's
+        frame, so its x is minus the baseline; if not, left and right traded places (depth < 0)."""
+        return self.translation_m[0, 0] >= 0
+
     def save(self, path: Path | str, rms_px: float | None = None) -> None:
         storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
         try:
@@ -113,10 +119,11 @@ def load_rig(path: Path | str) -> StereoRig:
         values |= {key: _distortion(storage, key, path) for key in _DISTORTIONS}
     finally:
         storage.release()
-    if values["T"][0, 0] >= 0:  # the right camera left of the left one: depth would come out negative
-        raise CalibrationFileError(f"{path}: T puts the right camera {values['T'][0, 0]:g} m to the left of the "
-                                   "left one (left and right swapped when it was made?)")
-    return StereoRig(size, values["K1"], values["D1"], values["K2"], values["D2"], values["R"], values["T"])
+    rig = StereoRig(size, values["K1"], values["D1"], values["K2"], values["D2"], values["R"], values["T"])
+    if rig.swapped:
+        raise CalibrationFileError(f"{path}: T puts the right camera {rig.translation_m[0, 0]:g} m to the left of "
+                                   "the left one (left and right swapped when it was made?)")
+    return rig
 
 
 def _node(storage: cv2.FileStorage, key: str, path: Path) -> cv2.FileNode:
