@@ -45,6 +45,17 @@ def wait_until(predicate, timeout_s: float, poll_s: float = 0.02) -> bool:
     return False
 
 
+def experiment_args(*argv: str):
+    """``syt-offboard experiment``'s arguments as its command line parses them."""
+    import argparse
+
+    from offboard.experiments import harness
+
+    parser = argparse.ArgumentParser()
+    harness.add_arguments(parser)
+    return parser.parse_args(list(argv))
+
+
 def client_transport(agent: LoopbackAgent, robot_id: str = "syt") -> TransportConfig:
     return TransportConfig(robot_id=robot_id, connect=(agent.endpoint,), multicast_scouting=False)
 

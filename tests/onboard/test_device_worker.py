@@ -6,6 +6,7 @@ from __future__ import annotations
 import threading
 
 import pytest
+from conftest import wait_until
 
 from onboard.agent import DeviceWorker
 
@@ -32,10 +33,7 @@ def test_a_job_or_a_reply_that_raises_leaves_the_device_free_for_the_next(fault,
     try:
         _run(worker, failing_job)
         assert replied.wait(2.0)
-        for _ in range(200):  # the worker frees itself before the reply
-            if not worker.busy:
-                break
-            threading.Event().wait(0.01)
+        assert wait_until(lambda: not worker.busy, 2.0)  # the worker frees itself before the reply
         _run(worker, lambda: done.set())
         assert done.wait(2.0)  # the thread lives on and takes the next job
         assert f"pantilt worker: {fault} failed" in caplog.text

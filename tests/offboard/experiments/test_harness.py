@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import os
@@ -13,6 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import experiment_args
 
 from offboard.experiments import harness as experiment
 from offboard.navigation import grid_planner
@@ -39,21 +39,15 @@ SUMMARY = {"found": True, "status": "found", "actions": 5, "positions_visited": 
            "cost_function": 3, "detector": "sift", "decisions": 5, "prior": "uniform"}
 
 
-def _args(*argv: str) -> argparse.Namespace:
-    parser = argparse.ArgumentParser()
-    experiment.add_arguments(parser)
-    return parser.parse_args(list(argv))
-
-
 # --- the grid --------------------------------------------------------------------------------------
 
 def test_the_paper_preset_is_the_reports_160_runs():
-    runs = build_runs(experiment.grid_from_args(_args("--preset", "paper")))
+    runs = build_runs(experiment.grid_from_args(experiment_args("--preset", "paper")))
     assert len(runs) == 160 and len({r.key for r in runs}) == 160
     assert {r.method for r in runs} == {"syt"} and {r.cost for r in runs} == {1, 2, 3, 4}
     assert {r.prior for r in runs} == {"uniform", "tables"} and {r.world for r in runs} == {"paper-lab"}
     assert len({r.start for r in runs}) == 5 and len({r.target for r in runs}) == 4
-    with_baselines = build_runs(experiment.grid_from_args(_args("--preset", "paper", "--baselines")))
+    with_baselines = build_runs(experiment.grid_from_args(experiment_args("--preset", "paper", "--baselines")))
     assert len(with_baselines) == 160 + len(BASELINES) * 5 * 4 * 2  # baselines once per start × target × prior
     assert all(r.cost is None for r in with_baselines if r.method != "syt")
 
@@ -143,7 +137,7 @@ def test_a_sweep_does_not_resume_into_a_folder_swept_with_other_settings(tmp_pat
     same = tmp_path / "same.toml"  # the same values from another file: the same settings
     same.write_text("planned_processing_s = 0.45\n[planner]\nleave_margin = 3.0\n")
     assert experiment.sweep(runs, experiment.SweepSettings(out, jobs=1, config_path=same)).done == 1
-    assert experiment.main(_args("--limit", "1", "--jobs", "1", "--out", str(out))) == 2
+    assert experiment.main(experiment_args("--limit", "1", "--jobs", "1", "--out", str(out))) == 2
     assert any("holds runs with other settings" in r.getMessage() for r in caplog.records if r.levelname == "ERROR")
 
 SMALL_ROOM = """
@@ -194,7 +188,7 @@ def test_a_report_from_a_malformed_look_log_is_refused_naming_the_line_and_the_r
     (tmp_path / row["run_dir"]).mkdir(parents=True)
     (tmp_path / row["run_dir"] / LOOKS_FILE).write_text('{"action": 1, "expected_p": "high"}\n')
     before = (tmp_path / "results.csv").read_text()
-    assert experiment.main(_args("--report-only", "--out", str(tmp_path))) == 2
+    assert experiment.main(experiment_args("--report-only", "--out", str(tmp_path))) == 2
     refusal = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
     assert refusal and refusal[0].startswith("cannot write the report in ") and f"{LOOKS_FILE}:1" in refusal[0]
     assert (tmp_path / "results.csv").read_text() == before and not (tmp_path / "report.md").exists()
@@ -210,7 +204,7 @@ def test_a_sweep_that_would_fail_every_run_is_refused_before_one_starts(tmp_path
     out = tmp_path / "out"
     argv = ("--worlds", str(world), "--costs", "3", "--priors", prior, "--starts", "1", "--targets", "1",
             "--out", str(out))
-    assert experiment.main(_args(*argv)) == 2
+    assert experiment.main(experiment_args(*argv)) == 2
     refusal = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
     assert refusal and refusal[0].startswith("cannot start the sweep: ") and why in refusal[0]
     assert not (out / "results.csv").exists()
@@ -439,7 +433,7 @@ def test_a_tiny_sweep_end_to_end_and_a_redone_run_gives_the_same_numbers(tmp_pat
     config.write_text("planned_processing_s = 0.5\n")
     argv = ("--out", str(tmp_path), "--start", "1.7,3.3,90", "--target", "1.7,4.65,0.75,-90", "--costs", "3",
             "--limit", "2", "--jobs", "2", "--config", str(config))
-    assert experiment.main(_args(*argv)) == 0
+    assert experiment.main(experiment_args(*argv)) == 0
     rows = {r["prior"]: r for r in csv.DictReader((tmp_path / "results.csv").open())}
     assert set(rows) == {"uniform", "tables"} and all(r["success"] == "True" for r in rows.values())
     assert float(rows["uniform"]["estimate_error_m"]) < 0.3 and (tmp_path / "report.md").is_file()
@@ -447,7 +441,7 @@ def test_a_tiny_sweep_end_to_end_and_a_redone_run_gives_the_same_numbers(tmp_pat
     assert looks and all(look.pose_error_m < 0.3 and look.heading_error_deg < 5.0 for look in looks)
     lines = (tmp_path / "results.csv").read_text().splitlines()
     (tmp_path / "results.csv").write_text("\n".join(lines[:-1]) + "\n")  # as if the last run never finished
-    assert experiment.main(_args(*argv)) == 0
+    assert experiment.main(experiment_args(*argv)) == 0
     again = list(csv.DictReader((tmp_path / "results.csv").open()))
     assert len(again) == 2
     redone, before = again[-1], next(csv.DictReader([lines[0], lines[-1]]))
@@ -461,7 +455,7 @@ def test_a_failed_run_is_a_row_naming_why_and_the_worker_goes_on(tmp_path):
     impossible = "4.5,2.5,0.3,-90"  # inside the centre table: the simulator refuses the placement
     argv = ("--out", str(tmp_path), "--start", "1.7,3.3,90", "--target", impossible, "--target", "1.7,4.65,0.75,-90",
             "--costs", "3", "--priors", "uniform", "--jobs", "1")
-    assert experiment.main(_args(*argv)) == 1  # a run failed
+    assert experiment.main(experiment_args(*argv)) == 1  # a run failed
     rows = {r["target"]: r for r in csv.DictReader((tmp_path / "results.csv").open())}
     assert "overlaps obstacle" in rows[impossible]["status"] and rows[impossible]["success"] == "False"
     assert rows[impossible]["status"].startswith("error: ") and "error: error" not in rows[impossible]["status"]

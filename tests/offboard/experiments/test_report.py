@@ -3,13 +3,13 @@ expected against realised P from each run's looks.jsonl."""
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import statistics
 from pathlib import Path
 
 import pytest
+from conftest import experiment_args
 
 from offboard.experiments import harness
 from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, coverage, coverage_md, parse_look,
@@ -30,12 +30,6 @@ STARTS = {"paper-lab": (4.5, 0.6, 90.0), "office": (2.625, 3.125, 0.0)}
 def _look(expected: float, realised: float, detected: bool = False) -> dict:
     return {"action": 1, "expected_p": expected, "realised_p": realised, "detected": detected,
             "processing_s": 2.0, "motion_s": 5.0}
-
-
-def _args(*argv: str) -> argparse.Namespace:
-    parser = argparse.ArgumentParser()
-    harness.add_arguments(parser)
-    return parser.parse_args(list(argv))
 
 
 def _row(results: Path, method: str, world: str, prior: str, seed: int, motion_s: float | None,
@@ -359,10 +353,10 @@ def test_a_malformed_results_file_is_refused_naming_the_line_and_kept(tmp_path, 
     before = results.read_text()
     with pytest.raises(ValueError, match="results.csv"):
         load_results(results)
-    assert harness.main(_args("--report-only", "--out", str(tmp_path))) == 2
+    assert harness.main(experiment_args("--report-only", "--out", str(tmp_path))) == 2
     refusal = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
     assert refusal and problem in refusal[0] and results.read_text() == before
-    assert harness.main(_args("--out", str(tmp_path), "--limit", "1")) == 2  # nor resumed into
+    assert harness.main(experiment_args("--out", str(tmp_path), "--limit", "1")) == 2  # nor resumed into
     assert results.read_text() == before
 
 
@@ -373,6 +367,6 @@ def test_a_results_file_from_before_the_later_columns_is_still_reported(tmp_path
         table = list(csv.reader(f))
     with results.open("w", newline="") as f:  # the file as the first harness wrote it
         csv.writer(f).writerows(line[:len(REQUIRED_COLUMNS)] for line in table)
-    assert harness.main(_args("--report-only", "--out", str(tmp_path))) == 0
+    assert harness.main(experiment_args("--report-only", "--out", str(tmp_path))) == 0
     row, = load_results(results)
     assert row["run_dir"] is None and row["glances"] is None and row["time_min"] is not None

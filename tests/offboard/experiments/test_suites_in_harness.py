@@ -3,8 +3,9 @@ suite world's scenarios start with its own target (the one the generator checked
 
 from __future__ import annotations
 
-import argparse
 import math
+
+from conftest import experiment_args
 
 from offboard.experiments import harness as experiment
 from offboard.experiments.world_facts import DRIVE_CLEARANCE_M, SeeingCriteria, load_facts, target_placements, viewpoint
@@ -12,9 +13,7 @@ from shared.world import suite_worlds
 
 
 def _grid(*argv: str) -> experiment.GridSpec:
-    parser = argparse.ArgumentParser()
-    experiment.add_arguments(parser)
-    return experiment.grid_from_args(parser.parse_args(list(argv)))
+    return experiment.grid_from_args(experiment_args(*argv))
 
 
 def test_worlds_takes_suite_names_alone_or_mixed():

@@ -3,11 +3,11 @@ and a generated world (its target on a shelf, no table) still gives scenarios.""
 
 from __future__ import annotations
 
-import argparse
 import math
 
 import numpy as np
 import pytest
+from conftest import experiment_args
 
 from offboard.experiments import harness as experiment
 from offboard.experiments.baselines import BaselineContext
@@ -141,12 +141,10 @@ def test_a_generated_world_without_tables_runs_on_its_own_target(tmp_path):
 
 
 def test_the_harness_accepts_the_priors_that_need_no_knowledge():
-    parser = argparse.ArgumentParser()
-    experiment.add_arguments(parser)
-    parsed = parser.parse_args(["--priors", "uniform,tables,surfaces,saliency"])
+    parsed = experiment_args("--priors", "uniform,tables,surfaces,saliency")
     assert parsed.priors == ("uniform", "tables", "surfaces", "saliency")
     with pytest.raises(SystemExit):
-        parser.parse_args(["--priors", "psychic"])
+        experiment_args("--priors", "psychic")
 
 
 def test_the_planner_gets_the_worlds_own_picture_or_the_built_in_one_it_names(tmp_path):
