@@ -136,10 +136,11 @@ def load_results(path: Path, latest: bool = True) -> list[dict]:
 
 
 def _parsed(row: dict, where: str) -> dict:
-    header = len(row) - (None in row)
-    if None in row or None in row.values():  # csv's marks for more fields than the header, and fewer
-        fields = header + len(row.get(None, ())) - sum(v is None for v in row.values())
-        raise ValueError(f"{where}: {fields} fields where the header has {header}")
+    if None in row:  # more fields than the header: csv keeps the rest under None
+        raise ValueError(f"{where}: {len(row) - 1 + len(row[None])} fields where the header has {len(row) - 1}")
+    if None in row.values():  # fewer: csv fills the missing ones with None
+        raise ValueError(f"{where}: {sum(v is not None for v in row.values())} fields where the header has "
+                         f"{len(row)}")
     allowed = tuple(map(str, COSTS)) if row["method"] == "syt" else ("",)  # the cost function is SYT's
     if row["cost"] not in allowed:
         raise ValueError(f"{where}: cost {row['cost']!r} for method {row['method']!r}, not one of {allowed}")
