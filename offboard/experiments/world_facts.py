@@ -227,14 +227,14 @@ def viewpoint(truth: Truth, start_xy: tuple[float, float], criteria: SeeingCrite
         centres = grid_planner.cell_centers(floor, cells)
         near = [np.hypot(*(centres - point).T) <= avoid_m for point in avoid]
         seen[tuple(cells[np.any(near, axis=0)].T)] = False
+    if seen[grid_planner.cell_of(floor, start_xy)]:
+        # the start's own cell sees it: the robot needs no drive at all (not the few mm to the cell's centre)
+        return start_xy, 0.0
     field_m = grid_planner.distance_field(floor, start_xy)
     cost = np.where(seen, field_m, np.inf)
     best = np.unravel_index(int(np.argmin(cost)), cost.shape)
     if not math.isfinite(cost[best]):
         return None, math.inf
-    if seen[grid_planner.cell_of(floor, start_xy)]:
-        # the start's own cell sees it: the robot needs no drive at all (not the few mm to the cell's centre)
-        return start_xy, 0.0
     return grid_planner.cell_center(floor, (int(best[0]), int(best[1]))), float(cost[best])
 
 
