@@ -439,9 +439,9 @@ def _flat(tree: dict, prefix: str = "") -> dict[str, object]:
     return out
 
 
-def _check_settings(settings: SweepSettings) -> None:
-    """Record the sweep's settings in ``--out``, or refuse (:class:`SweepRefused`) to resume a folder
-    whose rows ran with others: their figures would be mixed in one report, silently."""
+def _checked_settings(settings: SweepSettings) -> dict:
+    """The sweep's settings, to record in ``--out`` once it starts; refuses (:class:`SweepRefused`) a
+    folder whose rows ran with others: their figures would be mixed in one report, silently."""
     path, now = settings.out / SETTINGS_FILE, run_settings(settings)
     if path.is_file():
         before, after = _flat(json.loads(path.read_text())), _flat(now)
@@ -452,13 +452,13 @@ def _check_settings(settings: SweepSettings) -> None:
                                "use another --out")
     elif (settings.out / "results.csv").is_file():
         log.warning("%s has no %s: its runs are taken to have these settings", settings.out, SETTINGS_FILE)
-    path.write_text(json.dumps(now, indent=2) + "\n")
+    return now
 
 
 def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progress], None] | None = None) -> Progress:
     """Run what ``results.csv`` does not hold yet; each row is appended as its run finishes."""
     settings.out.mkdir(parents=True, exist_ok=True)
-    _check_settings(settings)
+    recorded = _checked_settings(settings)
     results = settings.out / "results.csv"
     try:
         done = finished_keys(results)
@@ -467,6 +467,8 @@ def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progr
     todo = [r for r in runs if r.key not in done]
     progress = Progress(total=len(runs), skipped=len(runs) - len(todo))
     prepared = _prepare(todo, settings.out)
+    # only now: a sweep refused before it starts must not bind the folder to settings no run had
+    (settings.out / SETTINGS_FILE).write_text(json.dumps(recorded, indent=2) + "\n")
     workers = _Workers(settings.jobs, settings.out / "workers")
     if on_progress:
         on_progress(progress)

@@ -208,6 +208,7 @@ def test_a_sweep_that_would_fail_every_run_is_refused_before_one_starts(tmp_path
     refusal = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
     assert refusal and refusal[0].startswith("cannot start the sweep: ") and why in refusal[0]
     assert not (out / "results.csv").exists()
+    assert not (out / experiment.SETTINGS_FILE).exists()  # nor is the folder bound to this sweep's settings
 
 
 def test_a_tables_prior_with_one_table_is_flagged_as_giving_the_target_away(tmp_path, caplog):
