@@ -10,6 +10,7 @@ import contextlib
 import ctypes
 import logging
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -51,8 +52,25 @@ def _die_with_parent() -> Callable[[], None] | None:
     return arm
 
 
+EPHEMERAL_RANGE = Path("/proc/sys/net/ipv4/ip_local_port_range")  # Linux: where outgoing ports come from
+LOWEST_PICKED_PORT = 10000  # below it sit well-known services' registered ports
+
+
 def free_tcp_port() -> int:
-    with socket.socket() as sock:
+    """A loopback TCP port free now, for an agent to listen on after this returns.
+
+    Picked below the kernel's ephemeral range: a port from ``bind(0)`` comes from that range, so between
+    this check and the agent's bind, any outgoing connection (another test's Zenoh client, say) could
+    take it and the agent would die with "Address already in use". Below the range only another
+    explicit bind can, and a random pick makes two pickers meeting unlikely."""
+    rng = random.SystemRandom()
+    ephemeral_low = int(EPHEMERAL_RANGE.read_text().split()[0]) if EPHEMERAL_RANGE.exists() else 0
+    for _ in range(100 if ephemeral_low > LOWEST_PICKED_PORT else 0):
+        port = rng.randrange(LOWEST_PICKED_PORT, ephemeral_low)
+        with socket.socket() as sock, contextlib.suppress(OSError):
+            sock.bind(("127.0.0.1", port))
+            return port
+    with socket.socket() as sock:  # no range known (not Linux), or none free below it
         sock.bind(("127.0.0.1", 0))
         return sock.getsockname()[1]
 

@@ -5,12 +5,15 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import socket
 import subprocess
 import sys
 import textwrap
 
 import pytest
 from conftest import wait_until
+
+from shared.launch import EPHEMERAL_RANGE, LOWEST_PICKED_PORT, free_tcp_port
 
 pytestmark = pytest.mark.integration
 
@@ -58,3 +61,15 @@ def test_the_agent_stops_when_its_planner_is_killed_outright(agent_is, tmp_path)
         if _alive(agent_pid):  # leave no robot behind, even when the test fails
             with contextlib.suppress(ProcessLookupError):
                 os.kill(agent_pid, signal.SIGKILL)
+
+
+@pytest.mark.skipif(not EPHEMERAL_RANGE.exists(), reason="the ephemeral port range is read from Linux's /proc")
+def test_an_agent_port_is_picked_where_outgoing_connections_never_land():
+    """A port from the ephemeral range could be taken by any client's connection before the agent
+    binds it: CI once lost 14 tests to "Address already in use" that way."""
+    low, high = map(int, EPHEMERAL_RANGE.read_text().split())
+    ports = {free_tcp_port() for _ in range(20)}
+    assert all(LOWEST_PICKED_PORT <= port < low for port in ports), (ports, low, high)
+    assert len(ports) > 1  # picked at random, so that two pickers seldom meet
+    with socket.socket() as sock:  # and free: it can be bound
+        sock.bind(("127.0.0.1", ports.pop()))
