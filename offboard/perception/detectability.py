@@ -45,6 +45,10 @@ class DetectabilityTable:
             steps = np.diff(getattr(self, name))
             if steps.size == 0 or steps.min() <= 0 or not np.allclose(steps, steps[0]):
                 raise ValueError(f"{name} must be evenly spaced and increasing (bins are looked up by arithmetic)")
+        if not 0.0 <= self.false_positive_rate <= 1.0:  # NaN fails too: it would make every update NaN
+            raise ValueError(f"false_positive_rate must lie in [0, 1], not {self.false_positive_rate}")
+        if not (math.isfinite(self.cost_ms) and self.cost_ms >= 0):
+            raise ValueError(f"cost_ms must be a time of at least 0 ms, not {self.cost_ms}")
         if self.face_size_m is not None and not (math.isfinite(self.face_size_m) and self.face_size_m > 0):
             raise ValueError(f"face_size_m must be a positive size in metres, not {self.face_size_m}")
 
@@ -67,8 +71,9 @@ class DetectabilityTable:
         return float(self.distance_edges_m[useful[0]]), float(self.distance_edges_m[useful[-1] + 1])
 
     def lookup(self, distance_m: np.ndarray, off_axis_deg: np.ndarray, facing_deg: np.ndarray) -> np.ndarray:
-        """Detection probability per query (nearest cell; zero outside the measured ranges)."""
-        idx = [np.searchsorted(edges, np.asarray(x), side="right") - 1 for edges, x in
+        """Detection probability per query (nearest cell; zero outside the measured ranges). Bins by
+        the same arithmetic as the planner's :func:`bin_index`, so that both agree on a bin's edge."""
+        idx = [np.floor((np.asarray(x, float) - edges[0]) / (edges[1] - edges[0])).astype(int) for edges, x in
                ((self.distance_edges_m, distance_m), (self.off_axis_edges_deg, np.abs(off_axis_deg)),
                 (self.facing_edges_deg, np.abs(facing_deg)))]
         inside = np.ones(np.broadcast(*idx).shape, bool)

@@ -3,12 +3,13 @@ rendered views, and what the search loads when no table is given."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 
-from offboard.perception.detectability import DetectabilityTable, face_size_m
+from offboard.perception.detectability import DetectabilityTable, bin_index, face_size_m
 from offboard.perception.detection.detector import shipped_table
 from offboard.perception.detection.target_model import TargetModel
 from offboard.search.run import SearchRequest, build_detectors, detectability_table
@@ -106,3 +107,23 @@ def test_binning_an_angle_by_its_cosine_gives_its_bin(edges_deg):
     want = [bin_index(edges_deg, float(a)) for a in angles]
     assert got == want
     assert cosine_bin(cos_edges, 1.0) == (0 if edges_deg[0] == 0 else -1)  # head-on: the first bin, if it has 0°
+
+
+@pytest.mark.parametrize("face_m", [0.17, 0.3])
+def test_the_table_and_the_planners_kernel_put_a_bin_edge_in_the_same_bin(face_m):
+    """A table rescaled for another face has edges that are not exact multiples of its step; the
+    planner (``bin_index``) and the yardsticks (``lookup``) must still read the same cell there."""
+    table = shipped("sift").for_face(face_m)
+    edges = table.distance_edges_m
+    distances = np.concatenate([edges, np.nextafter(edges, np.inf), np.nextafter(edges, -np.inf)])
+    off_axis = np.full_like(distances, 2.0)
+    facing = np.full_like(distances, 5.0)
+    planner = np.array([table.rate[i, 0, 0] if (i := bin_index(edges, d)) >= 0 else 0.0 for d in distances])
+    assert np.array_equal(table.lookup(distances, off_axis, facing), planner)
+
+
+@pytest.mark.parametrize(("field", "value"), [("false_positive_rate", float("nan")), ("false_positive_rate", 1.5),
+                                              ("cost_ms", -5.0), ("cost_ms", float("inf"))])
+def test_a_table_with_an_impossible_rate_or_cost_is_refused_by_name(field, value):
+    with pytest.raises(ValueError, match=field):
+        dataclasses.replace(shipped("sift"), **{field: value})
