@@ -54,6 +54,8 @@ class NccDetector(MeasuredDetector):
                  confident_threshold: float = 0.8, min_face_px: float = 32.0, scale_step: float = 1.12,
                  coarse_px: float = 16.0, min_level: int = 1, max_level: int = 3, refine_px: float = 96.0,
                  candidates: int = 3, cost_repeats: int = 3) -> None:
+        if not scale_step > 1.0:  # the template sizes grow by it from min_face_px
+            raise ValueError(f"scale_step must be over 1, got {scale_step}")
         self.model = model
         self.threshold, self.confident_threshold = threshold, max(confident_threshold, threshold)
         self.scale_step, self.coarse_px, self.refine_px = scale_step, coarse_px, refine_px

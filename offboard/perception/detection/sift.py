@@ -93,6 +93,8 @@ class SiftDetector(MeasuredDetector):
         self.focus_max_face_px = focus_max_face_px
         if global_shrink < 1.0:
             raise ValueError(f"global_shrink must be at least 1, got {global_shrink}")
+        if not (scale_step > 1.0 and tilt >= 1.0):  # else the model's views never shrink to min_face_px
+            raise ValueError(f"scale_step must be over 1 and tilt at least 1, got {scale_step} and {tilt}")
         self.global_zoom = 1.0 / global_shrink
         # A face magnified far beyond the picture's own pixels has no features as fine as the model's.
         super().__init__(operating_range(model, intrinsics, min_face_px=min_face_px, max_magnification=max_magnification))

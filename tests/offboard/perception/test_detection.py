@@ -167,6 +167,15 @@ def test_registry_builds_every_detector_and_refuses_unknown_names(detectors):
         make_detector("surf", MODEL, CAMERA)
 
 
+@pytest.mark.parametrize(("name", "options"), [("sift", {"scale_step": 1.0}), ("sift", {"scale_step": 0.9}),
+                                               ("sift", {"tilt": 0.5}), ("ncc", {"scale_step": 1.0}),
+                                               ("ncc", {"scale_step": 0.9})])
+def test_a_scale_step_that_never_reaches_the_smallest_face_is_refused(name, options):
+    """At 1 the model's views never shrink (SIFT looped for ever; NCC divided by zero), below it they grow."""
+    with pytest.raises(ValueError, match="scale_step|tilt"):
+        make_detector(name, MODEL, CAMERA, cost_repeats=0, **options)
+
+
 def test_range_follows_from_face_size_and_focal_length(detectors):
     for detector in detectors.values():
         near, far = detector.range_m
