@@ -76,9 +76,12 @@ class StereoConfig:
             raise ValueError(f"block_size must be odd and in [5, 255], not {self.block_size}")
         if not 1 <= self.prefilter_cap <= 63:
             raise ValueError(f"prefilter_cap must be in [1, 63], not {self.prefilter_cap}")
-        if min(self.texture_threshold, self.uniqueness_ratio, self.lr_max_diff_px,
-               self.speckle_window_px, self.speckle_range_px) < 0:
-            raise ValueError("stereo thresholds must not be negative")
+        thresholds = {"texture_threshold": self.texture_threshold, "uniqueness_ratio": self.uniqueness_ratio,
+                      "lr_max_diff_px": self.lr_max_diff_px, "speckle_window_px": self.speckle_window_px,
+                      "speckle_range_px": self.speckle_range_px}
+        for name, value in thresholds.items():  # NaN fails ">= 0": it would switch a check off unsaid
+            if not value >= 0 or (math.isinf(value) and name != "lr_max_diff_px"):
+                raise ValueError(f"{name} must be a number of at least 0 (inf only for lr_max_diff_px), not {value}")
 
 
 class StereoMatcher:
@@ -94,6 +97,8 @@ class StereoMatcher:
         grey_left, grey_right = to_grey(left), to_grey(right)
         if grey_left.shape != grey_right.shape:
             raise ValueError(f"left {grey_left.shape} and right {grey_right.shape} differ in size")
+        if grey_left.size == 0:
+            raise ValueError(f"the stereo pair is empty ({grey_left.shape})")
         cfg = self.config
         fixed = self._match(grey_left, grey_right)
         if math.isfinite(cfg.lr_max_diff_px):

@@ -8,6 +8,7 @@ in both.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,8 +23,10 @@ class VoxelGrid:
     origin_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        if self.resolution_m <= 0 or min(self.size_m) <= 0:
-            raise ValueError(f"a voxel grid needs positive sizes (got {self.size_m}, {self.resolution_m})")
+        sizes = (*self.size_m, self.resolution_m)
+        if len(self.size_m) != 3 or not all(math.isfinite(s) and s > 0 for s in sizes):
+            raise ValueError(f"a voxel grid needs three positive, finite sides and a positive, finite resolution "
+                             f"(got {self.size_m}, {self.resolution_m})")
 
     @property
     def shape(self) -> tuple[int, int, int]:

@@ -149,6 +149,19 @@ def test_bad_inputs_are_refused():
         matcher.disparity(np.zeros((H, W), np.uint8), np.zeros((H, W + 1), np.uint8))
     with pytest.raises(ValueError, match="must be uint8"):
         matcher.disparity(np.zeros((H, W), np.float32), np.zeros((H, W), np.float32))
+    with pytest.raises(ValueError, match="empty"):
+        matcher.disparity(np.zeros((0, 0), np.uint8), np.zeros((0, 0), np.uint8))
+
+
+@pytest.mark.parametrize(("name", "value"), [("texture_threshold", float("nan")), ("lr_max_diff_px", float("nan")),
+                                             ("speckle_range_px", float("nan")), ("speckle_range_px", float("inf")),
+                                             ("texture_threshold", -1.0)])
+def test_a_threshold_that_would_switch_a_check_off_unsaid_is_refused_by_name(name, value):
+    """NaN compares false with everything: a NaN texture threshold or left-right tolerance passed
+    every pixel, silently. Only the left-right tolerance may be inf, which is how it is switched off."""
+    with pytest.raises(ValueError, match=name):
+        StereoConfig(**{name: value})
+    assert StereoConfig(lr_max_diff_px=float("inf")).lr_max_diff_px == float("inf")
 
 
 # --------------------------------------------------------------------- disparity to points
