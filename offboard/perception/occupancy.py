@@ -46,6 +46,12 @@ class OccupancyConfig:
     max_range_m: float = field(default=6.0, metadata=bounds(0.5, 50.0))  # stereo beyond this is ignored
     point_stride_px: int = field(default=4, metadata=bounds(1, 32))  # subsample the disparity image
 
+    def __post_init__(self) -> None:
+        order = (self.clamp_min, self.free_log_odds, self.occupied_log_odds, self.clamp_max)
+        if not (order[0] <= order[1] < order[2] <= order[3]):  # else a wall is never occupied, or always free
+            raise ValueError(f"occupancy needs clamp_min <= free_log_odds < occupied_log_odds <= clamp_max, "
+                             f"not {' / '.join(map(str, order))}")
+
 
 @dataclass(frozen=True)
 class RayHits:
@@ -108,6 +114,9 @@ class OccupancyGrid:
                   baseline_m: float, camera_in_world: RigidTransform) -> int:
         """Fold one frame's stereo points into the grid (eq. 6-8); return the number of cubes updated."""
         k, c = intrinsics, self.config
+        if not (baseline_m > 0 and k.fx_px > 0 and k.fy_px > 0):  # else points land behind the camera
+            raise ValueError(f"stereo needs a positive baseline and focal length, not {baseline_m} m and "
+                             f"{k.fx_px}/{k.fy_px} px")
         u, v, d = (np.ascontiguousarray(a, np.float64) for a in (u_px, v_px, d_px))
         keep = (d > 0) & (k.fx_px * baseline_m / np.maximum(d, 1e-6) <= c.max_range_m)
         camera = np.array([k.fx_px, k.fy_px, k.cx_px, k.cy_px, baseline_m])
@@ -171,12 +180,16 @@ class OccupancyGrid:
     def cast_rays(self, origins_m: np.ndarray, directions: np.ndarray, max_range_m: float) -> RayHits:
         """Walk each ray to the first occupied cube (or the room's boundary, or ``max_range_m``);
         unknown space does not stop it (the expected sensed spheres' optimistic choice)."""
-        origins = np.ascontiguousarray((np.atleast_2d(origins_m) - self.grid.origin) / self.grid.resolution_m)
-        dirs = np.atleast_2d(directions).astype(np.float64)
-        dirs = np.ascontiguousarray(dirs / np.linalg.norm(dirs, axis=1, keepdims=True))
-        if origins.shape[0] == 1 and dirs.shape[0] > 1:
-            origins = np.ascontiguousarray(np.broadcast_to(origins, dirs.shape))
-        dist, hit = _cast_rays(self._log_odds, origins, dirs, max_range_m / self.grid.resolution_m,
+        origins, dirs = np.atleast_2d(origins_m).astype(np.float64), np.atleast_2d(directions).astype(np.float64)
+        if origins.shape[1:] != (3,) or dirs.shape[1:] != (3,) or 1 < len(origins) != len(dirs) > 1:
+            raise ValueError(f"rays need one origin or one per direction, each a 3-vector: got origins "
+                             f"{origins.shape} and directions {dirs.shape}")  # the kernel checks no bounds
+        norms = np.linalg.norm(dirs, axis=1, keepdims=True)
+        if not np.all(norms > 0):
+            raise ValueError("a ray's direction must not be the zero vector")
+        origins, dirs = np.broadcast_arrays((origins - self.grid.origin) / self.grid.resolution_m, dirs / norms)
+        dist, hit = _cast_rays(self._log_odds, np.ascontiguousarray(origins), np.ascontiguousarray(dirs),
+                               max_range_m / self.grid.resolution_m,
                                self.config.occupied_log_odds)
         return RayHits(dist * self.grid.resolution_m, hit)
 
@@ -187,7 +200,11 @@ class OccupancyGrid:
         The planner asks at every decision, and a look changes only part of the map: the blocks are
         kept per factor, and only those over a column written since are pooled again. So the result
         is one grid per factor, shared and brought up to date by each call (a new grid would cost
-        more than the pooling): use it before the next call."""
+        more than the pooling): use it before the next call.
+
+        Blocks cover the room in whole blocks, so where a side is not a whole number of them a ray
+        runs up to a block past that wall. Harmless for planning, its one user: there is no cube of
+        belief out there for the longer ray to reach."""
         if factor <= 1:
             return self
         if factor not in self._coarse:
@@ -215,7 +232,8 @@ class OccupancyGrid:
         radius_cells = int(math.ceil(robot_radius_m / res))
         disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_cells + 1, 2 * radius_cells + 1))
         padded = np.pad(occupied, radius_cells, constant_values=True)  # the walls bound the room
-        blocked = cv2.dilate(padded.astype(np.uint8), disc)[radius_cells:-radius_cells, radius_cells:-radius_cells]
+        inside = tuple(slice(radius_cells, radius_cells + n) for n in occupied.shape)
+        blocked = cv2.dilate(padded.astype(np.uint8), disc)[inside]
         return FloorMap(res, occupied, blocked.astype(bool), unknown)
 
 

@@ -82,6 +82,40 @@ def test_ray_casting_stops_at_the_first_occupied_cube_and_passes_unknown_space()
     assert not short.hit[0] and short.distance_m[0] == pytest.approx(1.0)
 
 
+def test_rays_from_many_origins_each_follow_their_own_direction_or_are_refused():
+    occ = OccupancyGrid(ROOM)
+    occ.integrate_disparity(_wall_disparity(3.0), K, MOUNT.baseline_m, _facing_east())  # a wall at x = 4 m
+    origins = np.array([[1.0, 2.0, 1.2], [2.0, 2.0, 1.2], [3.0, 2.0, 1.2]])
+    rays = occ.cast_rays(origins, np.array([1.0, 0.0, 0.0]), 10.0)  # one direction for all three
+    assert rays.distance_m == pytest.approx([3.0, 2.0, 1.0], abs=0.1) and rays.hit.all()
+    with pytest.raises(ValueError, match="one origin or one per direction"):  # the kernel read past the end
+        occ.cast_rays(origins, np.array([[1.0, 0, 0], [0, 1.0, 0]]), 10.0)
+    with pytest.raises(ValueError, match="zero vector"):  # it walked NaN to max range, unsaid
+        occ.cast_rays(origins[0], np.zeros(3), 10.0)
+
+
+@pytest.mark.parametrize("baseline_m", [0.0, -0.12])
+def test_a_frame_without_a_positive_baseline_is_refused(baseline_m):
+    """At 0 every point fell on the camera's own cube; negative, stereo carved free space behind it."""
+    with pytest.raises(ValueError, match="positive baseline"):
+        OccupancyGrid(ROOM).integrate_disparity(_wall_disparity(3.0), K, baseline_m, _facing_east())
+
+
+@pytest.mark.parametrize("changes", [{"clamp_max": 0.3}, {"free_log_odds": -0.1, "occupied_log_odds": -0.2},
+                                     {"clamp_min": -0.2}])
+def test_thresholds_the_clamps_make_unreachable_are_refused(changes):
+    """A clamp under the occupied threshold left a wall seen twenty times unoccupied."""
+    with pytest.raises(ValueError, match="clamp_min <= free_log_odds < occupied_log_odds <= clamp_max"):
+        OccupancyConfig(**changes)
+
+
+def test_a_robot_of_no_radius_blocks_what_is_occupied_and_the_walls_add_nothing():
+    occ = OccupancyGrid(ROOM)
+    occ.integrate_disparity(_wall_disparity(2.0), K, MOUNT.baseline_m, _facing_east())
+    fm = occ.floor_map(robot_radius_m=0.0, robot_height_m=1.35)
+    assert fm.blocked.shape == fm.occupied.shape and np.array_equal(fm.blocked, fm.occupied)
+
+
 def test_floor_map_blocks_obstacles_in_the_robot_band_inflated_by_its_radius():
     occ = OccupancyGrid(ROOM)
     occ.integrate_disparity(_wall_disparity(2.0), K, MOUNT.baseline_m, _facing_east())
