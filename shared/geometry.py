@@ -129,6 +129,13 @@ class Intrinsics:
             v = np.where(z > 0, self.fy_px * points_cam[..., 1] / z + self.cy_px, np.nan)
         return np.stack([u, v], axis=-1)
 
+    def back_project(self, u_px, v_px, z_m) -> np.ndarray:
+        """Pixels (u, v) at optical depth z to points (..., 3) in the optical frame: :meth:`project`
+        undone. Keeps the inputs' precision (float32 pixels give float32 points)."""
+        x = (u_px - self.cx_px) * z_m / self.fx_px
+        y = (v_px - self.cy_px) * z_m / self.fy_px
+        return np.stack([x, y, np.broadcast_to(z_m, np.shape(x))], axis=-1)
+
     def pixel_rays(self) -> np.ndarray:
         """Unnormalised ray directions (H, W, 3) through every pixel centre, z = 1."""
         u = (np.arange(self.width_px) - self.cx_px) / self.fx_px

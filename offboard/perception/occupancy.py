@@ -296,7 +296,8 @@ def _touch(c, frame, touch_stamp, touched, n_touched):
 
 @numba.njit(cache=True, inline="always")
 def _to_cubes(u, v, d, camera, rotation, translation):
-    """Pixel (u, v) at disparity d to a point in cube units (z = f·B/d, eq. 6); scalars, no allocation."""
+    """Pixel (u, v) at disparity d to a point in cube units (z = f·B/d, eq. 6): Intrinsics.back_project
+    and the camera's pose in one, for numba, on scalars, without allocating."""
     z = camera[0] * camera[4] / d
     x = (u - camera[2]) * z / camera[0]
     y = (v - camera[3]) * z / camera[1]

@@ -198,9 +198,7 @@ def points_from_disparity(disparity: np.ndarray, intrinsics: Intrinsics, baselin
     z = z[rows, cols]
     u = (cols * stride_px).astype(np.float32)
     v = (rows * stride_px).astype(np.float32)
-    x = (u - np.float32(intrinsics.cx_px)) * z / np.float32(intrinsics.fx_px)
-    y = (v - np.float32(intrinsics.cy_px)) * z / np.float32(intrinsics.fy_px)
-    return StereoPoints(u, v, sub[rows, cols], np.stack([x, y, z], axis=1).astype(np.float32))
+    return StereoPoints(u, v, sub[rows, cols], intrinsics.back_project(u, v, z).astype(np.float32))
 
 
 # ------------------------------------------------------------------------------ benchmark

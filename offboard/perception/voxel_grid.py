@@ -44,9 +44,6 @@ class VoxelGrid:
         """Integer (i, j, k) of the cube holding each point (..., 3); may be outside the grid."""
         return np.floor((points_m - self.origin) / self.resolution_m).astype(np.int64)
 
-    def contains(self, index: np.ndarray) -> np.ndarray:
-        return np.all((index >= 0) & (index < np.array(self.shape)), axis=-1)
-
     def axis_centers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The cubes' centre coordinates along x, y and z (world frame): :meth:`centers` without
         the (nx, ny, nz, 3) array."""

@@ -54,6 +54,15 @@ def test_projection_of_pixel_rays_lands_on_the_pixels():
     assert np.isnan(k.project(np.array([0.0, 0.0, -1.0]))).all()
 
 
+def test_back_projection_undoes_projection_and_keeps_float32():
+    k = Intrinsics.from_fov(640, 480, 66.0)
+    points = np.array([[0.4, -0.3, 2.0], [-1.0, 0.2, 5.0]])
+    pixels = k.project(points)
+    assert k.back_project(pixels[:, 0], pixels[:, 1], points[:, 2]) == pytest.approx(points)
+    single = k.back_project(np.float32(100.0), np.float32(50.0), np.float32(3.0))
+    assert single.shape == (3,) and single.dtype == np.float32
+
+
 def test_pose_motion_and_bearing():
     pose = Pose2D(1.0, 1.0, 0.0).moved(2.0, math.pi / 2)
     assert (pose.x_m, pose.y_m) == pytest.approx((1.0, 3.0))

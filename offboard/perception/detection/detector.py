@@ -128,9 +128,7 @@ def locate_target(detection: Detection, disparity: np.ndarray, intrinsics: Intri
     if values.size < max(1, min_valid_px):
         return None
     z = intrinsics.fx_px * baseline_m / float(np.median(values))
-    point_cam = np.array([(centre[0] - intrinsics.cx_px) * z / intrinsics.fx_px,
-                          (centre[1] - intrinsics.cy_px) * z / intrinsics.fy_px, z])
-    return camera_in_world.apply(point_cam)
+    return camera_in_world.apply(intrinsics.back_project(centre[0], centre[1], z))
 
 
 def operating_range(model: TargetModel, intrinsics: Intrinsics, *, min_face_px: float,
