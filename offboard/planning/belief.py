@@ -88,10 +88,14 @@ class TargetBelief:
     # --- updating ------------------------------------------------------------------------------------
 
     def set_prior(self, weights: np.ndarray, prob_outside: float) -> None:
-        """Start afresh: p(c_i) ∝ ``weights`` (non-negative, grid-shaped), the facing unknown."""
-        weights = np.asarray(weights, np.float64)
-        if weights.shape != self.grid.shape or np.any(weights < 0) or not np.all(np.isfinite(weights)):
-            raise ValueError(f"prior weights must be finite, non-negative and of shape {self.grid.shape}")
+        """Start afresh: p(c_i) ∝ ``weights`` (non-negative, grid-shaped), the facing unknown, nothing
+        seen yet (no cube ruled out, no facing blocked, P[F] = 0)."""
+        weights = self._grid_factors(weights, "prior weights")
+        if not 0.0 <= prob_outside < 1.0:
+            raise ValueError(f"p(c_out) must lie in [0, 1), not {prob_outside}")
+        for seen in (self._seen_empty, self._facing_blocked, self._solid_done):
+            seen[:] = False
+        self.success_prob = 0.0
         total = weights.sum()
         inside = (1.0 - prob_outside) * weights / total if total > 0 else np.zeros_like(weights)
         self._mass[:] = (inside / self.facing_sectors)[..., None]
@@ -108,24 +112,41 @@ class TargetBelief:
             return  # the target faces the camera, whichever way it looks
         inside_before = self._mass.sum(dtype=np.float64)
         xs, ys, _ = self.grid.axis_centers()
-        size = self.grid.size_m
         for s, azimuth in enumerate(self.facing_azimuths_rad):
             step = clearance_m * np.array([math.cos(azimuth), math.sin(azimuth)])
             for axis, centres in enumerate((xs, ys)):  # x and y apart: no (nx, ny, nz) array of faces
-                face = centres + step[axis]
-                beyond = (face < 0.0) | (face > size[axis])
+                face = centres + step[axis] - self.grid.origin_m[axis]
+                beyond = (face < 0.0) | (face > self.grid.size_m[axis])
                 self._mass[(slice(None),) * axis + (beyond, Ellipsis, s)] = 0.0
-        inside_after = self._mass.sum(dtype=np.float64)
-        if inside_after > 0:
-            self._mass *= np.float32(inside_before / inside_after)
+        if not self._keep_inside_total(inside_before):
+            self._renormalise()  # no facing fits anywhere: the target is not in this room
+            return
         self._stored_total = float(self._mass.sum(dtype=np.float64)) + self._outside
         self._rebuild_coarse()
 
     def reweight(self, factors: np.ndarray) -> None:
-        """Multiply every cube's mass by a grid-shaped factor and renormalise (priors that arrive
-        during the search: support surfaces, saliency)."""
-        self._mass *= np.asarray(factors, np.float32)[..., None]
+        """Multiply every cube's mass by a grid-shaped factor (priors that arrive during the search:
+        support surfaces, saliency). p(c_out) stays: such a prior says where in the room the target
+        is more likely, not whether it is in the room."""
+        factors = self._grid_factors(factors, "reweighting factors")
+        inside_before = self._mass.sum(dtype=np.float64)
+        self._mass *= factors.astype(np.float32)[..., None]
+        self._keep_inside_total(inside_before)
         self._renormalise()
+
+    def _grid_factors(self, factors: np.ndarray, what: str) -> np.ndarray:
+        factors = np.asarray(factors, np.float64)
+        if factors.shape != self.grid.shape or np.any(factors < 0) or not np.all(np.isfinite(factors)):
+            raise ValueError(f"{what} must be finite, non-negative and of shape {self.grid.shape}, "
+                             f"not of shape {factors.shape}")
+        return factors
+
+    def _keep_inside_total(self, inside_before: float) -> bool:
+        """Scale the cubes' stored mass back to ``inside_before`` in all; False if none is left."""
+        inside_after = self._mass.sum(dtype=np.float64)
+        if inside_after > 0:
+            self._mass *= np.float32(inside_before / inside_after)
+        return inside_after > 0
 
     def update_after_miss(self, cube_index: np.ndarray, detection_prob: np.ndarray) -> float:
         """Eq. 4 after a look that did not find the target.
@@ -153,14 +174,19 @@ class TargetBelief:
         likelihood = np.ascontiguousarray(likelihood, np.float32).reshape(len(cube_index), self.facing_sectors)
         if np.any(likelihood < 0) or not np.all(np.isfinite(likelihood)):
             raise ValueError("likelihoods must be finite and non-negative")
+        cube_index = np.ascontiguousarray(cube_index, np.int64)
+        saved = self._mass.reshape(-1, self.facing_sectors)[cube_index] if self._outside <= 0 else None  # a copy
         removed = _scale_seen_mass(self._mass.reshape(-1, self.facing_sectors), self._coarse.reshape(-1, self.facing_sectors),
-                                   np.ascontiguousarray(cube_index, np.int64), likelihood,
+                                   cube_index, likelihood,
                                    np.array(self.grid.shape, np.int64), np.array(self.coarse_shape, np.int64),
                                    self.coarse_factor)
         left = removed * self._scale
-        self._stored_total -= removed
-        if self._stored_total <= 0:
+        if self._stored_total - removed <= 0:  # possible only with p(c_out) = 0; the belief stays as it was
+            if saved is not None:
+                self._mass.reshape(-1, self.facing_sectors)[cube_index] = saved
+                self._rebuild_coarse()
             raise ValueError("an observation left no probability anywhere")
+        self._stored_total -= removed
         self._scale = 1.0 / self._stored_total
         if not 1e-6 < self._scale < 1e6:  # keep stored values in float32's comfortable range
             self._renormalise()

@@ -107,6 +107,50 @@ def test_observe_is_bayes_with_a_likelihood_per_listed_cube():
         belief.observe(cubes, -likelihood)
 
 
+def test_an_observation_that_would_leave_nothing_is_refused_and_changes_nothing():
+    belief = TargetBelief(GRID, facing_sectors=2, prob_outside=0.0)
+    before = belief.mass_by_facing()
+    everything = np.arange(GRID.num_cubes)
+    with pytest.raises(ValueError, match="no probability anywhere"):
+        belief.observe(everything, np.zeros((GRID.num_cubes, 2)))
+    assert np.array_equal(belief.mass_by_facing(), before)  # not scaled to zero on the way
+    assert belief.coarse_mass().sum() == pytest.approx(1.0)
+
+
+def test_a_prior_arriving_mid_search_moves_mass_inside_the_room_only():
+    """A support-surface or saliency factor says where in the room the target is likelier, not
+    whether it is in the room: p(c_out) stays."""
+    belief = TargetBelief(GRID, facing_sectors=2, prob_outside=0.05)
+    factors = np.ones(GRID.shape)
+    factors[:, :, 2:4] = 5.0
+    belief.reweight(factors)
+    assert belief.prob_outside == pytest.approx(0.05)
+    layers = belief.target_prob.sum(axis=(0, 1))
+    assert layers[2] == pytest.approx(5 * layers[0])
+    assert belief.target_prob.sum() + belief.prob_outside == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("factors", [np.full(GRID.shape, np.nan), np.full(GRID.shape, -1.0), np.ones(GRID.shape[2])])
+def test_reweighting_by_a_nan_negative_or_misshapen_factor_is_refused(factors):
+    belief = TargetBelief(GRID)
+    with pytest.raises(ValueError, match="reweighting factors"):
+        belief.reweight(factors)
+    assert belief.prob_outside == pytest.approx(0.05)
+
+
+def test_a_fresh_prior_forgets_what_was_seen():
+    belief = TargetBelief(GRID, facing_sectors=2)
+    empty = np.zeros(GRID.shape, bool)
+    empty[:5] = True
+    belief.update_after_miss(np.arange(50), np.full((50, 2), 0.9))
+    belief.rule_out_empty(empty, 0.1)
+    belief.set_prior(np.ones(GRID.shape), 0.05)
+    assert belief.success_prob == 0.0
+    assert belief.rule_out_empty(empty, 0.1) > 0  # the same cubes are ruled out again
+    with pytest.raises(ValueError, match="c_out"):
+        belief.set_prior(np.ones(GRID.shape), 1.5)
+
+
 def test_mass_near_counts_the_ball_around_a_point():
     belief = TargetBelief(GRID, facing_sectors=1, prob_outside=0.0)
     whole = belief.mass_near(np.array([1.0, 0.5, 0.25]), 10.0)
@@ -217,6 +261,15 @@ def test_no_picture_faces_a_wall_it_almost_touches():
     assert mass[0, :, :, 2].sum() == 0 and mass[0, :, :, 0].sum() > 0  # the west wall likewise
     assert mass[10, 5, 2].min() > 0  # the middle of the room faces anywhere
     assert mass.sum() == pytest.approx(0.9, rel=1e-5) and belief.prob_outside == pytest.approx(0.1)
+
+
+def test_walls_are_where_the_grid_is_and_a_room_no_facing_fits_holds_no_target():
+    moved = TargetBelief(VoxelGrid(GRID.size_m, GRID.resolution_m, (10.0, -3.0, 0.0)), facing_sectors=4)
+    moved.exclude_facings_into_walls(0.15)
+    assert moved.mass_by_facing()[10, 5, 2].min() > 0  # the room's middle, wherever the room is
+    cramped = TargetBelief(GRID, facing_sectors=4)
+    cramped.exclude_facings_into_walls(3.0)  # 3 m out, every face point is beyond a wall
+    assert cramped.target_prob.sum() == 0 and cramped.prob_outside == pytest.approx(1.0)
 
 
 def test_a_facing_with_a_surface_just_in_front_keeps_a_share_once():
