@@ -79,7 +79,7 @@ class PanTiltLimits:
 class CameraTiming:
     """Stereo capture timing (Bumblebee2 at 48 fps plus the transfer)."""
 
-    capture_s: float = field(default=0.1, metadata=bounds(0.0, 10.0))
+    capture_s: float = field(default=0.1, metadata=bounds(0.001, 10.0))  # never 0: a free look is worth ∞ a second
 
 
 def trapezoid_time_s(distance, top_speed: float, accel: float):

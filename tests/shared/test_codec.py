@@ -169,3 +169,11 @@ def test_a_png_whose_header_disagrees_with_the_shape_is_refused_before_it_is_dec
     with pytest.raises(ProtocolError, match=r"PNG of \(3000, 2000\)") as err:
         decode(_capture_body(encoding="png", data=big), m.Capture)
     assert err.value.field == "left.data" and not decoded
+
+
+def test_a_robot_that_says_capture_takes_no_time_is_refused():
+    """A look of 0 s would be worth infinitely much a second: the planner took it again and again."""
+    info = m.Info("c14", "syt", "sim", BaseLimits(), PanTiltLimits(), CameraTiming(capture_s=0.0), INTR, MOUNT, 1000)
+    with pytest.raises(ProtocolError) as err:
+        decode(encode(info), m.Info)
+    assert err.value.field == "camera.capture_s"
