@@ -184,13 +184,15 @@ class SearchPlanner:
         look_t = self.time_model.look_times_s(pose.heading_rad, pan_rad, tilt_rad, self.settings.azimuth_rad,
                                               self.settings.tilt_rad)
         far_t = self._candidate_times(pose, path_lengths_m)
-        best_anywhere = max(here_detection.max(), np.where(np.isfinite(far_t), values.find_prob[:-1], 0).max())
+        best_anywhere = max(here_detection.max(), np.where(np.isfinite(far_t), values.find_prob[:-1], 0).max(initial=0))
         if best_anywhere < self.config.min_detection_prob:
             return Decision("stop", f"no reachable action finds the target with probability ≥ "
                                     f"{self.config.min_detection_prob:g}"
                                     + self._unreachable_worth(values, path_lengths_m, pose), status="exhausted",
                             covering_here=here_covering, values=values)
-        if self.config.cost_function == 1:
+        if not len(self.positions):  # a room too small for the grid, its aimed viewpoints all blocked
+            decision = self._look_here(values, look_t, here_covering, "no other position to go to")
+        elif self.config.cost_function == 1:
             decision = self._eq9(values, look_t, far_t, here_covering, pose)
         else:
             move, why, worth = self._why_move(values, look_t, far_t, path_lengths_m, here_covering, pose)
@@ -273,6 +275,9 @@ class SearchPlanner:
         heavy = heavy_blocks(self.belief)
         rows = []
         for geometry, which in parts:
+            if not len(which):
+                rows.append(ActionValues(np.zeros((0, len(self.settings))), np.zeros(0)))
+                continue
             spheres = sensed_spheres(coarse, geometry.cameras_m(which), self.bins, far, self._blocks_m[heavy])
             rows.append(evaluate(geometry, which, self.belief, spheres, self.config.behind_surface_m, heavy))
         return ActionValues(np.vstack([r.find_prob for r in rows]),

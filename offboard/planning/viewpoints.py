@@ -22,7 +22,7 @@ def grid_vertices(room_size_m: tuple[float, float, float], spacing_m: float) -> 
     """Interior vertices of the floor grid (report §3.3.3): 32 in a 9 × 5 m room at 1 m."""
     xs = np.arange(spacing_m, room_size_m[0] - 1e-9, spacing_m)
     ys = np.arange(spacing_m, room_size_m[1] - 1e-9, spacing_m)
-    return np.array([(x, y) for x in xs for y in ys], float)
+    return np.array([(x, y) for x in xs for y in ys], float).reshape(-1, 2)  # (0, 2) in a room under 2 steps
 
 
 def best_distance_m(table: DetectabilityTable, within: float = 0.05) -> float:

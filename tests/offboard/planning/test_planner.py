@@ -64,6 +64,22 @@ def test_the_paper_lab_has_544_actions():
     assert planner.action_count == 544
 
 
+@pytest.mark.parametrize("cost", [1, 3])
+def test_a_room_with_no_other_position_to_go_to_is_searched_from_where_the_robot_stands(cost):
+    """A 6 × 2 m room on a 2 m grid has no interior vertex; with no viewpoint either, the planner
+    crashed on the empty candidate set."""
+    grid = VoxelGrid((6.0, 2.0, 2.5), 0.1)
+    assert grid_vertices(grid.size_m, 2.0).shape == (0, 2)
+    belief = TargetBelief(grid, facing_sectors=1)
+    planner = SearchPlanner(belief, PlannerConfig(cost_function=cost, grid_spacing_m=2.0, viewpoints=0),
+                            DetectabilityTable.nominal(), TIME, K, MOUNT)
+    occupancy = OccupancyGrid(grid)
+    pose = Pose2D(3.0, 1.0, 0.0)
+    planner.plan_positions(pose, occupancy.floor_map(0.3, 1.35), 0.3)
+    decision = planner.decide(pose, 0.0, 0.0, 0.0, occupancy, np.zeros(0))
+    assert decision.kind == "look" and decision.find_prob > 0 and "no other position" in decision.reason
+
+
 def test_a_hinted_region_is_looked_at_first():
     planner = _planner(3, boxes=(HintBox((1.8, 2.6, 0.9), (2.2, 3.0, 1.2), 0.9),))
     pose = Pose2D(2.0, 1.5, 0.0)  # the hint is 1.3 m to the robot's left (+y)
