@@ -343,3 +343,18 @@ def test_the_looks_here_are_valued_as_from_a_candidate_there_as_the_robot_stays_
         there = np.flatnonzero(np.all(planner.positions == (pose.x_m, pose.y_m), axis=1))[0]
         assert np.array_equal(values.find_prob[-1], values.find_prob[there])
         assert (values.find_prob[-1].max() > 0.1) == (pose == near_b)
+
+
+def test_a_block_below_the_lowest_elevation_any_tilt_sees_has_no_sphere_bin():
+    """int() rounded an elevation up to half a bin below the lowest one into that bin."""
+    from offboard.planning.action_values import ActionGeometry, CameraSettings, block_centers
+    from offboard.planning.sensed_sphere import SphereBins
+
+    belief = TargetBelief(VoxelGrid((4.0, 4.0, 2.5), 0.05), coarse_factor=2)
+    bins = SphereBins()
+    geometry = ActionGeometry(belief, np.array([[2.0, 2.0]]), CameraSettings.from_fov(K), MOUNT, K,
+                              DetectabilityTable.nominal(near_m=0.1), bins)
+    offset = block_centers(belief) - geometry.cameras_m(np.zeros(1, np.int64))[0]
+    elevation = np.arcsin(offset[:, 2] / np.linalg.norm(offset, axis=1))
+    in_reach = (geometry.distance_m[0] > 0) & (geometry.sphere_bin[0] >= 0)
+    assert in_reach.any() and (elevation[in_reach] >= bins.el_min_rad).all()
