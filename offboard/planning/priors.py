@@ -64,7 +64,10 @@ def hints(grid: VoxelGrid, boxes: tuple[HintBox, ...]) -> np.ndarray:
     claimed = np.zeros(grid.shape, bool)
     for box in boxes:
         cubes = grid.box_slices(np.array(box.min), np.array(box.max))
-        count = max(1, int(np.prod([s.stop - s.start for s in cubes])))
+        count = int(np.prod([s.stop - s.start for s in cubes]))
+        if count == 0:  # its weight would vanish, unsaid
+            raise ValueError(f"hint {box.name or box.min}: the box holds no cube centre of the room (a box "
+                             f"thinner than a cube, {grid.resolution_m:g} m, or outside the room)")
         weights[cubes] += box.weight / count
         claimed[cubes] = True
     rest = max(0.0, 1.0 - sum(b.weight for b in boxes))
@@ -167,7 +170,8 @@ class Saliency(_FactorMemory):
 
     def __init__(self, target_pictures: tuple[np.ndarray, ...], grid: VoxelGrid, gain: float = 2.0, bins: int = 16):
         hsv = [cv2.cvtColor(p, cv2.COLOR_RGB2HSV) for p in target_pictures]
-        hist = cv2.calcHist(hsv, [0, 1], None, [bins, bins], [0, 180, 0, 256])
+        # one picture at a time: calcHist numbers the channels across its list of images
+        hist = sum(cv2.calcHist([picture], [0, 1], None, [bins, bins], [0, 180, 0, 256]) for picture in hsv)
         self._hist = cv2.normalize(hist, None, 0, 255, cv2.NORM_MINMAX)
         super().__init__(grid)  # the strongest factor each cube has had
         self.gain = gain

@@ -627,7 +627,10 @@ def build_prior(grid: VoxelGrid, specs: list[str]) -> np.ndarray:
         if kind == "uniform":
             weighted.append((1.0, priors.uniform(grid)))
         elif kind == "hints":
-            weighted.append((1.0, priors.hints(grid, load_config(priors.HintsFile, Path(arg)).hint)))
+            try:
+                weighted.append((1.0, priors.hints(grid, load_config(priors.HintsFile, Path(arg)).hint)))
+            except ValueError as exc:  # a box the room's cubes miss
+                raise ConfigError(arg, None, str(exc)) from None
         elif kind == "last-seen":
             values = [float(v) for v in arg.split(",")]
             weighted.append((1.0, priors.last_seen(grid, np.array(values[:3]), values[3] if len(values) > 3 else 0.0)))

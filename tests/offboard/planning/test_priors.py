@@ -7,6 +7,7 @@ import pytest
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.voxel_grid import VoxelGrid
 from offboard.planning.priors import HintsFile, Saliency, SupportSurfaces
+from offboard.search.loop import build_prior
 from shared.config import ConfigError, load_config
 from shared.geometry import Intrinsics, RigidTransform
 
@@ -39,6 +40,17 @@ def test_saliency_raises_the_cubes_seen_where_the_image_looks_like_the_target():
     corners = np.concatenate([factor[:2, :2].ravel(), factor[-2:, -2:].ravel()])
     assert centre > 1.5 and corners.max() < 1.05 and factor.min() >= 1.0
     assert np.all(Saliency((_picture(),), FRONT).factor(_wall(False), ALL, CAMERA, K) == pytest.approx(1.0, abs=1e-3))
+
+
+def test_saliency_knows_the_colours_of_every_side_of_a_target():
+    """calcHist numbers channels across all its images: given two pictures, it read the first only."""
+    green = np.zeros((48, 48, 3), np.uint8)
+    green[:] = (30, 200, 40)
+    wall = _wall(False)
+    wall[96:144, 136:184] = green
+    two_sided = Saliency((_picture(), green), FRONT)
+    assert two_sided.colour_match(wall)[120, 160] > 0.5
+    assert Saliency((_picture(),), FRONT).colour_match(wall)[120, 160] < 0.05
 
 
 def test_saliency_counts_the_same_sight_once_and_a_restored_one_remembers_it():
@@ -80,3 +92,11 @@ def test_a_hints_file_is_read_as_a_config_and_refused_naming_the_file_and_the_pr
     path.write_text('[[hint]]\n' + box.format(0.6) + '[[hint]]\n' + box.format(0.5))
     with pytest.raises(ConfigError, match="hints.toml.*add up to more than 1"):
         load_config(HintsFile, path)
+
+
+def test_a_hint_box_the_rooms_cubes_miss_is_refused_naming_it(tmp_path):
+    """A box thinner than a cube holds no cube centre: its weight vanished and the prior was uniform."""
+    path = tmp_path / "hints.toml"
+    path.write_text('[[hint]]\nname = "shelf"\nmin = [0.2, 0.2, 0.51]\nmax = [0.6, 0.6, 0.52]\nweight = 0.9\n')
+    with pytest.raises(ConfigError, match="hints.toml.*shelf.*no cube centre"):
+        build_prior(VoxelGrid((2.0, 2.0, 1.0), 0.05), [f"hints:{path}"])
