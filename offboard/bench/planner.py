@@ -6,6 +6,9 @@ map holds what a few stereo frames of walls and furniture would put there, the b
 prior, so that sensed spheres are not all empty. A decision includes the navigation distances to
 the candidates, the sensed spheres at all of them, and scoring every action. It is repeated from one
 pose, as the looks from one spot are, so the geometry of the looks here is computed once.
+
+What is timed is what the search runs: its planning blocks (:func:`planning_block_factor`), the
+SIFT table shipped for the bundled target, and an update that reads the frame's disparity.
 """
 
 from __future__ import annotations
@@ -18,12 +21,13 @@ import numpy as np
 from offboard.navigation import grid_planner
 from offboard.navigation.navigator import NavigatorConfig
 from offboard.planning.belief import TargetBelief
-from offboard.perception.detectability import DetectabilityTable
+from offboard.perception.detection.detector import shipped_table
 from offboard.planning.detection_function import look_footprint, visible_depth
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.planning.planner import PlannerConfig, SearchPlanner
 from offboard.planning.priors import HintBox, hints
 from offboard.planning.time_model import TimeModel
+from offboard.search.loop import SearchConfig, planning_block_factor
 from offboard.perception.voxel_grid import VoxelGrid
 from shared.timing import median_ms
 from shared.geometry import HeadMount, Intrinsics, Pose2D
@@ -39,17 +43,21 @@ BASE = BaseLimits()
 TABLES = (HintBox((1.0, 4.3, 0.75), (2.4, 5.0, 1.05), 0.45), HintBox((3.9, 2.27, 0.75), (5.1, 2.73, 1.05), 0.45))
 
 
+def _wall(depth_m: float) -> np.ndarray:
+    """The disparity of a wall ``depth_m`` ahead, filling the frame."""
+    return np.full((K.height_px, K.width_px), K.fx_px * MOUNT.baseline_m / depth_m, np.float32)
+
+
 def _scenario(resolution_m: float, room_m: tuple[float, float, float] = ROOM_M) -> tuple[SearchPlanner, OccupancyGrid]:
     grid = VoxelGrid(room_m, resolution_m)
     occupancy = OccupancyGrid(grid)
     for x, y, heading, depth in ((4.5, 0.6, 90, 1.7), (4.5, 0.6, 0, 4.0), (4.5, 0.6, 180, 4.0), (2.0, 2.5, 90, 2.0)):
         cam = MOUNT.camera_in_world(Pose2D(x, y, math.radians(heading)), 0.0, 0.0)
-        occupancy.integrate_disparity(np.full((480, 640), K.fx_px * MOUNT.baseline_m / depth, np.float32), K,
-                                      MOUNT.baseline_m, cam)
-    belief = TargetBelief(grid, coarse_factor=max(1, round(0.2 / resolution_m)))
-    belief.set_prior(hints(grid, TABLES), prob_outside=0.05)
-    planner = SearchPlanner(belief, PlannerConfig(), DetectabilityTable.nominal(),
-                            TimeModel(BASE, PanTiltLimits(), CameraTiming()), K, MOUNT)
+        occupancy.integrate_disparity(_wall(depth), K, MOUNT.baseline_m, cam)
+    config = SearchConfig(room_m=room_m, resolution_m=resolution_m)
+    belief = TargetBelief(grid, coarse_factor=planning_block_factor(config))
+    belief.set_prior(hints(grid, TABLES), prob_outside=config.prob_outside)
+    planner = SearchPlanner(belief, config.planner, shipped_table("sift"), TimeModel(BASE, PanTiltLimits(), CameraTiming()), K, MOUNT)
     return planner, occupancy
 
 
@@ -68,7 +76,7 @@ def _decide(planner: SearchPlanner, occupancy: OccupancyGrid, pose: Pose2D):
 
 def _update(planner: SearchPlanner, occupancy: OccupancyGrid, pose: Pose2D) -> None:
     cam = MOUNT.camera_in_world(pose, 0.0, 0.0)
-    depth = visible_depth(None, occupancy, cam, K, MOUNT.baseline_m, 16, planner.table.range_m[1])
+    depth = visible_depth(_wall(1.7), occupancy, cam, K, MOUNT.baseline_m, 16, planner.table.range_m[1])
     fp = look_footprint(occupancy.grid, cam, K, depth, 16, planner.table, planner.belief.facing_azimuths_rad, 0.15)
     planner.belief.update_after_miss(fp.cube_index, fp.detection_prob)
 
