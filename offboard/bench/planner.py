@@ -57,7 +57,8 @@ def _scenario(resolution_m: float, room_m: tuple[float, float, float] = ROOM_M) 
     config = SearchConfig(room_m=room_m, resolution_m=resolution_m)
     belief = TargetBelief(grid, coarse_factor=planning_block_factor(config))
     belief.set_prior(hints(grid, TABLES), prob_outside=config.prob_outside)
-    planner = SearchPlanner(belief, config.planner, shipped_table("sift"), TimeModel(BASE, PanTiltLimits(), CameraTiming()), K, MOUNT)
+    time_model = TimeModel(BASE, PanTiltLimits(), CameraTiming())
+    planner = SearchPlanner(belief, config.planner, shipped_table("sift"), time_model, K, MOUNT)
     return planner, occupancy
 
 

@@ -232,7 +232,8 @@ def _geometry(centers, positions, rows, geometry, n_el, n_az, rotations, d_edges
             if dist < inner or dist > outer:
                 continue
             ai = min(int((math.atan2(wy, wx) + math.pi) / (2 * math.pi) * n_az), n_az - 1)
-            ei = int(math.floor((math.asin(wz / dist) - el_min) / (el_max - el_min) * n_el))  # int() rounds -0.5 up to 0
+            # floor, not int(): int() rounds half a bin below the lowest up into it
+            ei = int(math.floor((math.asin(wz / dist) - el_min) / (el_max - el_min) * n_el))
             if ei < 0 or ei >= n_el:
                 continue  # beyond what any tilt can see
             distance[p, c] = dist

@@ -184,7 +184,8 @@ class SearchPlanner:
         look_t = self.time_model.look_times_s(pose.heading_rad, pan_rad, tilt_rad, self.settings.azimuth_rad,
                                               self.settings.tilt_rad)
         far_t = self._candidate_times(pose, path_lengths_m)
-        best_anywhere = max(here_detection.max(), np.where(np.isfinite(far_t), values.find_prob[:-1], 0).max(initial=0))
+        reachable = np.where(np.isfinite(far_t), values.find_prob[:-1], 0)
+        best_anywhere = max(here_detection.max(), reachable.max(initial=0))
         if best_anywhere < self.config.min_detection_prob:
             return Decision("stop", f"no reachable action finds the target with probability ≥ "
                                     f"{self.config.min_detection_prob:g}"
