@@ -167,15 +167,6 @@ _LOST_PLANNER = textwrap.dedent("""
 """)
 
 
-def _wait_until(predicate, timeout_s: float) -> float:
-    start = time.monotonic()
-    while time.monotonic() - start < timeout_s:
-        if predicate():
-            return time.monotonic() - start
-        time.sleep(0.01)
-    raise AssertionError("condition not reached in time")
-
-
 def test_driving_into_an_obstacle_stalls_at_its_side(tmp_path, box_world):
     with running_agent(tmp_path, "--world", str(box_world), "--start", "3.0,1.0,90") as (_, robot):
         assert robot.move(distance_m=3.0).status == "stalled"
@@ -222,12 +213,13 @@ def test_the_base_stops_when_the_planner_dies_mid_move(tmp_path, box_world):
         planner = subprocess.Popen([sys.executable, "-c", _LOST_PLANNER, agent.endpoint],
                                    stdout=subprocess.PIPE, text=True)
         assert planner.stdout.readline().strip() == "moving"
-        _wait_until(lambda: robot.state().base_moving, 5.0)
+        assert wait_until(lambda: robot.state().base_moving, 5.0)
         time.sleep(0.5)
         planner.kill()
         planner.wait()
-        stopped_after = _wait_until(lambda: not robot.state().base_moving, 3.0)
-        assert stopped_after < 1.0
+        killed = time.monotonic()
+        assert wait_until(lambda: not robot.state().base_moving, 3.0, poll_s=0.01)
+        assert time.monotonic() - killed < 1.0
         travelled = robot.sim_truth().x_m - 0.5
         assert 0.0 < travelled < 1.5  # far short of the 4 m commanded
         time.sleep(0.5)
@@ -271,7 +263,7 @@ def test_a_second_motion_while_moving_is_refused_and_stop_interrupts(tmp_path, b
         results = []
         mover = threading.Thread(target=lambda: results.append(robot.move(distance_m=4.0, speed_m_s=0.3)))
         mover.start()
-        _wait_until(lambda: robot.state().base_moving, 5.0)
+        assert wait_until(lambda: robot.state().base_moving, 5.0)
         with pytest.raises(CommandError) as err:
             robot.move(distance_m=1.0)
         assert err.value.code == "busy"
@@ -285,12 +277,13 @@ def test_sigterm_stops_the_base_and_exits_cleanly(tmp_path, box_world):
         results = []
         mover = threading.Thread(target=lambda: results.append(robot.move(distance_m=4.0)), daemon=True)
         mover.start()
-        _wait_until(lambda: robot.state().base_moving, 5.0)
+        assert wait_until(lambda: robot.state().base_moving, 5.0)
         agent.process.send_signal(signal.SIGTERM)
         assert agent.process.wait(timeout=10) == 0
         mover.join(timeout=5.0)
         assert results and results[0].status == "stopped"  # the motion's own reply, sent before it exits
-        _wait_until(lambda: not any(r.ok for r in robot.session.liveliness().get(robot.keys.agent_alive, timeout=0.3)), 5.0)
+        assert wait_until(lambda: not any(r.ok for r in robot.session.liveliness().get(robot.keys.agent_alive,
+                                                                               timeout=0.3)), 5.0)
     assert "agent stopped; base stopped" in (tmp_path / "onboard.log").read_text()
 
 
