@@ -88,14 +88,18 @@ def robot_config(cert_dir: Path, listen: str = f"tls/0.0.0.0:{ROBOT_PORT}") -> d
 
 
 def client_config(cert_dir: Path, role: str, connect: str) -> dict:
-    """A workstation's Zenoh configuration: it dials the robot over TLS with its role's certificate."""
+    """A workstation's Zenoh configuration: it dials the robot over TLS with its role's certificate,
+    and listens nowhere. (A peer's default listener, plain TCP on every interface, would let anyone
+    without a certificate publish telemetry to the planner and answer its commands in the robot's place:
+    the robot's access-control list guards the robot, not the planner.)"""
     if role not in GRANTS:
         raise ValueError(f"role {role!r} is not one of {', '.join(GRANTS)}")
     return {
         "mode": "peer",
         "connect": {"endpoints": [connect]},
+        "listen": {"endpoints": []},
         "scouting": {"multicast": {"enabled": False}},
-        "transport": {"link": {"tls": {
+        "transport": {"link": {"protocols": ["tls"], "tls": {
             "root_ca_certificate": str(cert_dir / "ca.pem"),
             "connect_certificate": str(cert_dir / f"{role}.pem"),
             "connect_private_key": str(cert_dir / f"{role}.key"),

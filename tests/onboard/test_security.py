@@ -16,7 +16,7 @@ import zenoh
 
 from offboard.robot.robot_client import RobotClient
 from onboard.certificates import Issued, issue, make_certificates
-from onboard.secure_transport import write_configs
+from onboard.secure_transport import GRANTS, listen_endpoints, write_configs
 from shared import messages as m
 from shared.codec import encode
 from shared.keys import RobotKeys
@@ -135,3 +135,12 @@ def test_the_robot_config_refuses_a_plain_listener(certs, tmp_path):
     assert json.loads(config.get_json("listen/endpoints")) == ["tcp/127.0.0.1:0"]  # the flag did override
     with pytest.raises(zenoh.ZError, match="Unsupported protocol: tcp"):
         zenoh.open(config)
+
+
+@pytest.mark.parametrize("role", sorted(GRANTS))
+def test_a_workstation_listens_nowhere_and_speaks_only_tls(certs, role):
+    """A peer's default listener (plain TCP on every interface) let a session without a certificate
+    publish odometry to the planner and answer its move query in the robot's place."""
+    config = TransportConfig(zenoh_config=certs / f"zenoh-{role}.json5", multicast_scouting=False).zenoh()
+    assert listen_endpoints(config) == []
+    assert json.loads(config.get_json("transport/link/protocols")) == ["tls"]
