@@ -7,7 +7,9 @@ Threads, and why each exists:
 - one *worker per device* (base, pan-tilt, camera), so a stop is served while the base moves and a
   second motion for a busy device is refused rather than queued;
 - the *publisher* sends odometry and pan/tilt state at a steady rate (latest-only: DROP);
-- the *watchdog* stops the base when the planner goes silent or its liveliness token vanishes.
+- the *watchdog* stops the base when the planner that sent the move under way goes silent or its
+  liveliness token vanishes. A planner names itself in each command (the query's attachment), in its
+  heartbeats and in its token's key, so another planner's heartbeats never keep its motion alive.
 
 Safety: the base is stopped at start-up (a Pioneer resumes its last motion when communication
 returns), by the watchdog, and in ``finally`` when the agent ends for any reason.
@@ -21,7 +23,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import msgpack
 import zenoh
@@ -50,6 +52,12 @@ _WATCHDOG_POLL_S = 0.02  # how often the watchdog looks at a moving base
 _ARRIVED_M = 1e-3  # a waypoint this near the robot is where it stands
 
 
+def _sender(query: zenoh.Query) -> str:
+    """The planner id a command names itself by (its attachment); "" if none."""
+    attachment = query.attachment
+    return attachment.to_bytes().decode("utf-8", "replace")[:64] if attachment is not None else ""
+
+
 class CommandRefused(Exception):
     def __init__(self, code: str, message: str):
         super().__init__(message)
@@ -58,6 +66,8 @@ class CommandRefused(Exception):
 
 class DeviceWorker:
     """One thread per device; ``try_submit`` refuses a job while the previous one runs."""
+
+    close_timeout_s = 5.0  # how long close waits for a job under way before leaving it behind
 
     def __init__(self, name: str):
         self.name = name
@@ -80,10 +90,12 @@ class DeviceWorker:
 
     def close(self) -> None:
         try:  # a device stuck in a job holds a queued one: give up on it rather than hang the agent's exit
-            self._jobs.put(None, timeout=5.0)
+            self._jobs.put(None, timeout=self.close_timeout_s)
         except queue.Full:
-            log.error("%s worker: still busy after 5 s; left behind", self.name)
-        self._thread.join(timeout=5.0)
+            pass
+        self._thread.join(timeout=self.close_timeout_s)
+        if self._thread.is_alive():
+            log.error("%s worker: still busy after %g s; left behind", self.name, self.close_timeout_s)
 
     def _loop(self) -> None:
         while (job := self._jobs.get()) is not None:
@@ -103,11 +115,15 @@ class DeviceWorker:
 
 @dataclass
 class _PlannerWatch:
-    """When the planner last spoke, and whether its liveliness token is present."""
+    """Which planner owns the move under way, when each planner last spoke, and whose token is gone."""
 
-    last_contact_s: float = 0.0
-    token_lost: bool = False
+    owner: str = ""  # the planner that sent the move under way ("" for one that did not name itself)
+    last_contact_s: dict[str, float] = field(default_factory=dict)  # planner id -> monotonic time
+    gone: set[str] = field(default_factory=set)  # planners whose liveliness token was withdrawn, not renewed
     bad_heartbeat: bool = False  # the last sample on the heartbeat key was not one: said once, not at every beat
+
+    def heard(self, planner: str) -> None:
+        self.last_contact_s[planner] = time.monotonic()
 
 
 class Agent:
@@ -121,7 +137,7 @@ class Agent:
         self._commands: queue.Queue[tuple[str, zenoh.Query] | None] = queue.Queue(maxsize=64)
         self._workers = {name: DeviceWorker(name) for name in ("base", "pantilt", "camera")}
         self._cancel = {"base": threading.Event(), "pantilt": threading.Event()}
-        self._watch = _PlannerWatch(last_contact_s=time.monotonic())
+        self._watch = _PlannerWatch()
         self._shutdown = threading.Event()
         self._wake_watchdog = threading.Event()  # a lost planner is acted on at once, not at the next poll
         self._declared: list = []
@@ -179,11 +195,7 @@ class Agent:
     # --- callbacks: never block ----------------------------------------------------------------------
 
     def _enqueuer(self, kind: str) -> Callable[[zenoh.Query], None]:
-        contact = kind in _PLANNER_COMMANDS
-
         def enqueue(query: zenoh.Query) -> None:
-            if contact:
-                self._watch.last_contact_s = time.monotonic()
             try:
                 self._commands.put_nowait((kind, query))
             except queue.Full:
@@ -192,24 +204,25 @@ class Agent:
 
     def _on_heartbeat(self, sample: zenoh.Sample) -> None:
         try:  # only a heartbeat is word from the planner, not anything put on its key
-            decode(sample.payload.to_bytes(), m.Heartbeat)
+            beat = decode(sample.payload.to_bytes(), m.Heartbeat)
         except ProtocolError as exc:
             if not self._watch.bad_heartbeat:
                 log.warning("ignoring what is not a heartbeat on %s: %s", sample.key_expr, exc)
             self._watch.bad_heartbeat = True
             return
         self._watch.bad_heartbeat = False
-        self._watch.last_contact_s = time.monotonic()
+        self._watch.heard(beat.planner_id)
 
     def _on_planner_liveliness(self, sample: zenoh.Sample) -> None:
+        planner = str(sample.key_expr).rsplit("/", 1)[-1]
         if sample.kind == zenoh.SampleKind.DELETE:
             log.warning("planner gone: %s", sample.key_expr)
-            self._watch.token_lost = True
+            self._watch.gone.add(planner)
             self._wake_watchdog.set()
         else:
             log.info("planner connected: %s", sample.key_expr)
-            self._watch.token_lost = False
-            self._watch.last_contact_s = time.monotonic()
+            self._watch.gone.discard(planner)
+            self._watch.heard(planner)
 
     # --- dispatcher ----------------------------------------------------------------------------------
 
@@ -219,6 +232,10 @@ class Agent:
             payload = query.payload.to_bytes() if query.payload is not None else b""
             try:
                 command = decode(payload, _REQUEST_TYPES[kind])
+                if self._shutdown.is_set():
+                    raise CommandRefused("shutdown", "the agent is shutting down")
+                if kind in _PLANNER_COMMANDS:  # a well-formed command, not any bytes on its key
+                    self._watch.heard(_sender(query))
                 getattr(self, f"_on_{kind}")(query, command)
             except ProtocolError as exc:
                 log.warning("%s: malformed command: %s", kind, exc)
@@ -251,8 +268,11 @@ class Agent:
         speed = cmd.speed_m_s if cmd.speed_m_s is not None else limits.default_speed_m_s
         if speed > limits.max_speed_m_s:
             raise CommandRefused("limit", f"speed_m_s={speed:g} exceeds the base's max_speed_m_s={limits.max_speed_m_s:g}")
+        owner = _sender(query)
+        if owner in self._watch.gone:  # queued before its token went: nobody is left to stop it
+            raise CommandRefused("planner", f"planner {owner!r} is gone (its liveliness token was withdrawn)")
         cancel = self._fresh_cancel("base")
-        self._watch.token_lost = False  # a loss matters to the motions under way when it happened
+        self._watch.owner = owner
 
         def job() -> m.MoveResult:
             start = self.devices.clock.now_s()
@@ -266,8 +286,10 @@ class Agent:
         """A new cancel flag for the device's next job (only when it is free: a busy one is refused)."""
         if self._workers[device].busy:
             raise CommandRefused("busy", f"the {device} is executing another command; send stop first")
-        self._cancel[device] = threading.Event()
-        return self._cancel[device]
+        cancel = self._cancel[device] = threading.Event()
+        if self._shutdown.is_set():  # _close cancelled the flags before this one was in place
+            cancel.set()
+        return cancel
 
     def _resolve_motion(self, cmd: m.MoveCommand) -> tuple[float, float]:
         limits = self.devices.base.limits
@@ -400,9 +422,10 @@ class Agent:
                     continue
             except DeviceFault:  # link down: no stop could reach the base; its firmware halts it (2 s)
                 continue
-            silent_s = time.monotonic() - self._watch.last_contact_s
-            if self._watch.token_lost:
-                self._stop_all("planner lost (liveliness token gone)")
+            owner = self._watch.owner
+            silent_s = time.monotonic() - self._watch.last_contact_s.get(owner, 0.0)
+            if owner in self._watch.gone:
+                self._stop_all(f"planner {owner!r} lost (liveliness token gone)")
             elif silent_s >= timeout_s:
                 self._stop_all(f"watchdog: no word from the planner for {silent_s * 1000:.0f} ms")
             else:

@@ -148,10 +148,12 @@ class InfoRequest:
 @dataclass(frozen=True)
 class ErrorReply:
     """A refused or failed command. ``code``: ``protocol`` (malformed), ``limit`` (outside the
-    device limits), ``busy`` (the device is executing another command), ``device`` (hardware fault)."""
+    device limits), ``busy`` (the device is executing another command), ``device`` (hardware fault),
+    ``planner`` (a move from a planner whose liveliness token is gone), ``shutdown`` (the agent is
+    stopping)."""
 
     command_id: str
-    code: Literal["protocol", "limit", "busy", "device"]
+    code: Literal["protocol", "limit", "busy", "device", "planner", "shutdown"]
     message: str
 
 

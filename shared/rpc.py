@@ -25,9 +25,12 @@ class RobotUnavailable(RuntimeError):
     """Nobody answered in time: the agent is not running, unreachable or stuck."""
 
 
-def request(session: zenoh.Session, key: str, command: Any, expected: type[T], timeout_s: float) -> T:
-    """Send ``command`` to the queryable at ``key``; return its decoded reply or raise."""
-    replies = session.get(key, payload=encode(command), timeout=timeout_s)
+def request(session: zenoh.Session, key: str, command: Any, expected: type[T], timeout_s: float,
+            sender: str | None = None) -> T:
+    """Send ``command`` to the queryable at ``key``, naming its ``sender`` (a planner's id, as its
+    heartbeats do: the agent's watchdog keeps a motion alive on its sender's word only); return the
+    decoded reply or raise."""
+    replies = session.get(key, payload=encode(command), timeout=timeout_s, attachment=sender)
     for reply in replies:
         if reply.ok is not None:
             result = decode(reply.ok.payload.to_bytes(), expected)

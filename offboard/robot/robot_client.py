@@ -121,7 +121,7 @@ class RobotClient:
         return f"{uuid.uuid4().hex[:8]}-{next(self._ids)}"
 
     def _request(self, key: str, command: object, expected: type, timeout_s: float):
-        return request(self.session, key, command, expected, timeout_s)
+        return request(self.session, key, command, expected, timeout_s, sender=self.planner_id)
 
     def _motion_timeout_s(self, turn_deg: float, distance_m: float, speed_m_s: float | None) -> float:
         """Generous: the robot's own time for the motion at the speed asked (when paced in real time) and a

@@ -22,6 +22,7 @@ from offboard.robot.robot_client import CommandError
 from shared import messages as m
 from shared.codec import decode, encode
 from shared.keys import RobotKeys
+from shared.rpc import request
 
 pytestmark = pytest.mark.integration
 
@@ -251,12 +252,44 @@ def test_what_is_not_a_heartbeat_on_its_key_does_not_keep_the_robot_moving(tmp_p
             session.get(keys.move, payload=encode(m.MoveCommand("noisy", distance_m=4.0, speed_m_s=0.3)), timeout=30.0)
             for _ in range(25):  # 2.5 s of garbage, ten times a second: the watchdog (0.8 s) must still fire
                 noise.put(b"\x00not msgpack")
+                session.get(keys.capture, payload=b"\x00not a command either", timeout=1.0)  # nor malformed commands
                 time.sleep(0.1)
             last = decode(odometry.recv().payload.to_bytes(), m.Odometry)
             assert not last.moving and 0.0 < last.pose.x_m - 0.5 < 0.6
     log_text = (tmp_path / "onboard.log").read_text()
     assert "watchdog: no word from the planner" in log_text
     assert log_text.count("ignoring what is not a heartbeat") == 1  # said once, not 25 times
+
+def test_another_planners_heartbeats_do_not_keep_a_frozen_planners_move_alive(tmp_path, box_world):
+    """Planner A froze with its token still held (Zenoh's own threads keep it alive) while planner B
+    beats on: B's heartbeats once counted as A's word, and A's move ran its whole course."""
+    with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):  # robot: B, beating
+        keys = RobotKeys("syt")
+        with client_transport(agent).open() as session:
+            token = session.liveliness().declare_token(keys.planner_alive("frozen-a"))
+            move = m.MoveCommand("frozen", distance_m=4.0, speed_m_s=0.3)  # 13 s unless stopped
+            result = request(session, keys.move, move, m.MoveResult, 30.0, sender="frozen-a")
+            token.undeclare()
+        assert result.status == "stopped" and 0.0 < result.distance_m < 0.6
+        assert robot.move(distance_m=0.1).status == "done"  # B still drives
+    assert "watchdog: no word from the planner" in (tmp_path / "onboard.log").read_text()
+
+
+def test_a_move_from_a_planner_whose_token_is_gone_is_refused(tmp_path, box_world):
+    """A move queued before its planner's token vanished once cleared the loss and ran."""
+    with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):
+        keys = RobotKeys("syt")
+        log_path = tmp_path / "onboard.log"
+        with client_transport(agent).open() as session:
+            token = session.liveliness().declare_token(keys.planner_alive("gone-a"))
+            assert wait_until(lambda: "planner connected: syt/syt/planner/gone-a" in log_path.read_text(), 5.0)
+            token.undeclare()
+            assert wait_until(lambda: "planner gone: syt/syt/planner/gone-a" in log_path.read_text(), 5.0)
+            with pytest.raises(CommandError) as err:
+                request(session, keys.move, m.MoveCommand("late", distance_m=1.0), m.MoveResult, 5.0, sender="gone-a")
+        assert err.value.code == "planner" and "gone-a" in str(err.value)
+        assert not robot.state().base_moving
+
 
 def test_a_second_motion_while_moving_is_refused_and_stop_interrupts(tmp_path, box_world):
     with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):

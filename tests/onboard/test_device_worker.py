@@ -50,3 +50,13 @@ def test_a_second_job_is_refused_while_the_first_runs():
         release.set()
     finally:
         worker.close()
+
+
+def test_closing_a_worker_stuck_in_a_job_gives_up_and_says_so(monkeypatch, caplog):
+    """The job under way has left the queue, so the stop marker always fitted and nothing was said."""
+    monkeypatch.setattr(DeviceWorker, "close_timeout_s", 0.2)
+    worker, release = DeviceWorker("camera"), threading.Event()
+    _run(worker, release.wait)
+    worker.close()
+    assert "camera worker: still busy after 0.2 s; left behind" in caplog.text
+    release.set()
