@@ -84,7 +84,8 @@ class RobotClient:
     def move_to(self, x_m: float, y_m: float, speed_m_s: float | None = None) -> m.MoveResult:
         """Turn towards the world point (as the robot's odometry sees it) and drive to it."""
         cmd = m.MoveCommand(self._next_id(), waypoint_m=(x_m, y_m), speed_m_s=speed_m_s)
-        return self._request(self.keys.move, cmd, m.MoveResult, self._motion_timeout_s(180.0, 30.0, speed_m_s))
+        farthest_m = (self._info or self.info()).base.max_distance_m  # the robot refuses a waypoint farther
+        return self._request(self.keys.move, cmd, m.MoveResult, self._motion_timeout_s(180.0, farthest_m, speed_m_s))
 
     def stop(self) -> m.StopResult:
         return self._request(self.keys.stop, m.StopCommand(self._next_id()), m.StopResult, 5.0)
