@@ -23,6 +23,8 @@ import math
 import sys
 from pathlib import Path
 
+import zenoh
+
 from onboard import signals
 from onboard.config import OnboardConfig
 from shared.arguments import floats
@@ -81,8 +83,9 @@ def run_agent(argv: list[str]) -> int:
     try:
         config = load_config(OnboardConfig, args.config, _overrides(args))
         transport = transport_from_args(args)
+        zenoh_config = transport.zenoh()  # a bad --zenoh-config is named before any device opens
         world = _load_world(args, config)
-    except (ConfigError, WorldError, ValueError, FileNotFoundError) as exc:
+    except (ConfigError, WorldError, ValueError, OSError, zenoh.ZError) as exc:
         log.error("%s", exc)
         return 2
     from onboard.agent import Agent
@@ -100,7 +103,7 @@ def run_agent(argv: list[str]) -> int:
     from onboard.zenoh_log import route_zenoh_log
 
     route_zenoh_log()  # refused TLS peers and access-control drops: only Zenoh sees them
-    warn_if_exposed(transport.zenoh())
+    warn_if_exposed(zenoh_config)
     try:
         session = transport.open()
     except Exception as exc:  # zenoh.ZError: the agent would have closed the devices; it never ran

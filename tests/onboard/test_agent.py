@@ -353,6 +353,17 @@ def test_a_slow_move_in_real_time_is_waited_for_and_an_absurd_one_refused_by_nam
                 robot.move(distance_m=absurd)
 
 
+@pytest.mark.parametrize("content", [None, "{ not json5"])
+def test_a_bad_zenoh_config_is_named_before_any_device_opens(tmp_path, content):
+    path = tmp_path / "zenoh.json5"
+    if content is not None:
+        path.write_text(content)
+    done = subprocess.run([sys.executable, "-m", "onboard.cli", "--backend", "sim", "--zenoh-config", str(path)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert "simulated robot" not in done.stderr  # refused before the robot was built
+
+
 def test_an_agent_whose_session_cannot_open_says_so_and_exits():
     done = subprocess.run([sys.executable, "-m", "onboard.cli", "--backend", "sim", "--listen", "tcp/256.1.1.1:7447",
                            "--no-multicast-scouting"], capture_output=True, text=True, timeout=60)
