@@ -27,6 +27,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 ROLES = ("planner", "observer")  # client roles: the access-control list grants each its own keys
 ROBOT = "robot"
 DEFAULT_DAYS = 825
+MAX_DAYS = 100 * 365  # a validity past the year 9999 cannot be written at all
 _CLOCK_SKEW = dt.timedelta(hours=1)  # a robot whose clock lags a little still accepts a fresh certificate
 
 
@@ -133,8 +134,8 @@ def robot_hosts(extra: Iterable[str]) -> list[str]:
     """The names a planner may dial the robot by: loopback always, then the operator's."""
     hosts = ["localhost", "127.0.0.1", *extra]
     for host in hosts:
-        if not host or any(c.isspace() or c in "/*," for c in host):
-            raise ValueError(f"--host {host!r} is not a host name or IP address")
+        if not host or any(c.isspace() or c in "/*,[]" for c in host):  # brackets: a DNS name no address matches
+            raise ValueError(f"--host {host!r} is not a host name or IP address (an IPv6 one without brackets)")
     return hosts
 
 

@@ -14,7 +14,7 @@ import logging
 import sys
 from pathlib import Path
 
-from onboard.certificates import DEFAULT_DAYS, make_certificates, robot_hosts
+from onboard.certificates import DEFAULT_DAYS, MAX_DAYS, make_certificates, robot_hosts
 from onboard.secure_transport import write_configs
 
 log = logging.getLogger("syt.onboard")
@@ -43,8 +43,8 @@ def run(argv: list[str]) -> int:
         return 2
     try:
         robot_hosts(args.host)
-        if args.days <= 0:
-            raise ValueError(f"--days must be positive, not {args.days}")
+        if not 0 < args.days <= MAX_DAYS:
+            raise ValueError(f"--days must be 1 to {MAX_DAYS}, not {args.days}")
     except ValueError as exc:
         log.error("%s", exc)
         return 2

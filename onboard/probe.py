@@ -28,7 +28,7 @@ def identify_port(port: str, baud: int = 9600) -> dict:
                       ("ptu-d46", lambda: ptu.probe(port, baud, timeout_s=2.0))):
         try:
             return {**ask(), "port": port}
-        except DeviceFault as exc:
+        except (DeviceFault, OSError) as exc:  # OSError: pyserial's, a port that hangs up mid-handshake
             log.info("%s is not a %s: %s", port, kind, exc)
             problems.append(f"{kind}: {exc}")
     return {"device": "unknown", "port": port, "error": "; ".join(problems)}

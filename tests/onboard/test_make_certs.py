@@ -61,5 +61,9 @@ def test_bad_hosts_and_days_are_refused_by_name(tmp_path, caplog):
     assert main(["make-certs", "--out", str(tmp_path / "a"), "--host", "robot/1"]) == 2
     assert "--host 'robot/1'" in caplog.text
     assert main(["make-certs", "--out", str(tmp_path / "b"), "--days", "0"]) == 2
-    assert "--days must be positive" in caplog.text
-    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    assert "--days must be 1 to 36500, not 0" in caplog.text
+    assert main(["make-certs", "--out", str(tmp_path / "c"), "--days", "4000000"]) == 2  # past the year 9999
+    assert "not 4000000" in caplog.text
+    assert main(["make-certs", "--out", str(tmp_path / "d"), "--host", "[fe80::1]"]) == 2  # a name no address matches
+    assert "without brackets" in caplog.text
+    assert not any((tmp_path / name).exists() for name in "abcd")

@@ -3,6 +3,9 @@ frames, and what is said when nothing answers."""
 
 from __future__ import annotations
 
+import socket
+import threading
+
 import cv2
 import numpy as np
 import pytest
@@ -36,3 +39,15 @@ def test_nothing_answering_is_said_with_each_attempt(tmp_path):
     missing = identify_camera(str(tmp_path / "video9"))
     assert missing["device"] == "unknown" and "cannot be opened" in missing["error"]
     assert describe(missing).startswith(f"{tmp_path / 'video9'}: nothing identified (")
+
+
+def test_a_port_that_hangs_up_at_once_is_reported_not_raised():
+    """pyserial's own error, from a Pioneer handshake cut off, escaped and ended the whole probe."""
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        port = server.getsockname()[1]
+        hang_up = threading.Thread(target=lambda: [server.accept()[0].close() for _ in range(2)], daemon=True)
+        hang_up.start()
+        answer = identify_port(f"socket://127.0.0.1:{port}")
+    assert answer["device"] == "unknown" and "pioneer: " in answer["error"]
