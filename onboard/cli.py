@@ -175,9 +175,8 @@ def run_picture(argv: list[str]) -> int:
     parser.add_argument("--out", type=Path, required=True, metavar="FILE.png")
     args = parser.parse_args(argv)
     _setup_logging(False)
-    import cv2
-
     from onboard.sim.textures import PictureError, load_picture
+    from shared.image_files import write_rgb
 
     try:
         picture = load_picture(args.name)
@@ -185,7 +184,11 @@ def run_picture(argv: list[str]) -> int:
         log.error("%s", exc)
         return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(args.out), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR))
+    try:
+        write_rgb(args.out, picture)
+    except OSError as exc:  # an extension OpenCV cannot write, a full disk
+        log.error("%s", exc)
+        return 1
     sys.stdout.write(f"{args.out}\n")
     return 0
 

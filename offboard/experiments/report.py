@@ -32,6 +32,7 @@ from offboard.experiments.calibration import (LOOKS_FILE, Look, calibration, cal
                                               coverage_md, localisation_md, read_looks)
 from offboard.experiments.failures import failures_md, last_true_look
 from offboard.experiments.target_views import target_views, target_views_md, viewed_runs
+from shared.image_files import write_bgr
 
 log = logging.getLogger(__name__)
 
@@ -798,7 +799,7 @@ def bar_chart(path: Path, title: str, groups: list[str], series: list[tuple[str,
         x, y = left + (s % 4) * 200, h - bottom + 42 + (s // 4) * 20
         cv2.rectangle(img, (x, y - 10), (x + 14, y + 2), _COLOURS[s % len(_COLOURS)], -1)
         cv2.putText(img, name, (x + 20, y), font, 0.42, (0, 0, 0), 1, cv2.LINE_AA)
-    cv2.imwrite(str(path), img)
+    write_bgr(path, img)
 
 
 def write_plots(rows: list[dict], out: Path) -> list[Path]:

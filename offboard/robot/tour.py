@@ -9,10 +9,9 @@ import json
 import logging
 from pathlib import Path
 
-import cv2
-
 from offboard.robot.robot_client import RobotClient
 from shared import messages as m
+from shared.image_files import write_rgb
 
 log = logging.getLogger(__name__)
 
@@ -42,8 +41,8 @@ def run_tour(robot: RobotClient, out_dir: Path) -> list[Path]:
 
 def save_capture(capture: m.Capture, out_dir: Path, stem: str) -> list[Path]:
     paths = [out_dir / f"{stem}_left.png", out_dir / f"{stem}_right.png", out_dir / f"{stem}.json"]
-    cv2.imwrite(str(paths[0]), cv2.cvtColor(capture.left, cv2.COLOR_RGB2BGR))
-    cv2.imwrite(str(paths[1]), cv2.cvtColor(capture.right, cv2.COLOR_RGB2BGR))
+    write_rgb(paths[0], capture.left)
+    write_rgb(paths[1], capture.right)
     meta = {"pose": vars(capture.pose), "pan_deg": capture.pan_deg, "tilt_deg": capture.tilt_deg,
             "intrinsics": vars(capture.intrinsics), "mount": vars(capture.mount),
             "robot_time_s": capture.robot_time_s}

@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from offboard.perception.occupancy import FloorMap
+from shared.image_files import write_bgr
 
 PX_PER_M = 80
 MARGIN_PX = 40
@@ -60,7 +61,7 @@ def draw_top_view(path: Path, room_m: tuple[float, float, float], floor: FloorMa
     if estimate_m is not None:
         cv2.drawMarker(image, px(estimate_m[0], estimate_m[1]), (0, 0, 255), cv2.MARKER_TILTED_CROSS, 22, 3)
     cv2.putText(image, title, (MARGIN_PX, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 1, cv2.LINE_AA)
-    cv2.imwrite(str(path), image)
+    write_bgr(path, image)
 
 
 def _draw_obstacles(image: np.ndarray, floor: FloorMap, px) -> None:

@@ -13,13 +13,12 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
-
 from onboard.config import CameraConfig
 from onboard.sim import textures
 from onboard.sim.render import StereoRenderer
 from shared.geometry import Pose2D
 from shared.world import World, parse_world
+from shared.image_files import write_rgb
 
 BOARD_CENTER_M = (0.0, 2.5, 1.4)  # on the x = 0 wall, facing +x
 
@@ -68,8 +67,7 @@ def render_chessboard_views(out_dir: Path | str, camera: CameraConfig = CameraCo
         frame = renderer.render(*_head_setting(view, camera.head_height_m))
         for side, image in (("left", frame.left), ("right", frame.right)):
             path = out / f"{side}_{i:02d}.png"
-            cv2.imwrite(str(path), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-            written.append(path)
+            written.append(write_rgb(path, image))
     return written
 
 

@@ -6,12 +6,12 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from onboard.sim.render import StereoFrame, StereoRenderer
 from shared.world import World
 from shared.geometry import HeadMount, Intrinsics, Pose2D
+from shared.image_files import write_rgb
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +33,6 @@ def write_frame(frame: StereoFrame, out_dir: Path) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [out_dir / "left.png", out_dir / "right.png", out_dir / "depth.npy"]
     for path, rgb in zip(paths[:2], (frame.left, frame.right)):
-        if not cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):  # OpenCV writes BGR
-            raise OSError(f"cannot write {path}")
+        write_rgb(path, rgb)
     np.save(paths[2], frame.depth_m.astype(np.float32))
     return paths
