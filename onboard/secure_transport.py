@@ -140,10 +140,10 @@ def listen_endpoints(config: zenoh.Config) -> list[str]:
     return list(endpoints)
 
 
-def exposed_without_tls(endpoint: str) -> bool:
-    """Whether ``endpoint`` (e.g. ``tcp/0.0.0.0:7447``) can be reached from another machine unencrypted."""
+def reachable(endpoint: str) -> bool:
+    """Whether ``endpoint`` (e.g. ``tcp/0.0.0.0:7447``) can be reached from another machine."""
     protocol, _, address = endpoint.partition("/")
-    if protocol in SECURE_PROTOCOLS or protocol in _LOCAL_PROTOCOLS:
+    if protocol in _LOCAL_PROTOCOLS:
         return False
     host = address.split("?", 1)[0].split("#", 1)[0].rpartition(":")[0].strip("[]")
     if host == "localhost":
@@ -154,10 +154,27 @@ def exposed_without_tls(endpoint: str) -> bool:
         return True  # a host name: it resolves to whatever the network says
 
 
+def exposed_without_tls(endpoint: str) -> bool:
+    """Whether ``endpoint`` can be reached from another machine unencrypted."""
+    return endpoint.partition("/")[0] not in SECURE_PROTOCOLS and reachable(endpoint)
+
+
 def warn_if_exposed(config: zenoh.Config) -> list[str]:
-    """Log a warning for every listening endpoint that strangers on the network could drive the robot through."""
-    exposed = [endpoint for endpoint in listen_endpoints(config) if exposed_without_tls(endpoint)]
-    for endpoint in exposed:
-        log.warning("listening on %s without TLS: anyone who can reach it can drive the robot "
-                    "(see README, Security: syt-onboard make-certs and --zenoh-config)", endpoint)
+    """Log a warning for every listening endpoint that strangers on the network could drive the robot
+    through: one without TLS, or one with TLS that asks no client certificate or has no access control
+    (TLS alone encrypts; it does not say who may drive)."""
+    guarded = (json.loads(config.get_json("transport/link/tls/enable_mtls")) is True
+               and json.loads(config.get_json("access_control/enabled")) is True)
+    exposed = []
+    for endpoint in filter(reachable, listen_endpoints(config)):
+        if exposed_without_tls(endpoint):
+            log.warning("listening on %s without TLS: anyone who can reach it can drive the robot "
+                        "(see README, Security: syt-onboard make-certs and --zenoh-config)", endpoint)
+        elif not guarded:
+            log.warning("listening on %s with TLS but without client certificates (enable_mtls) and access "
+                        "control: anyone who can reach it can drive the robot (see README, Security: "
+                        "syt-onboard make-certs and --zenoh-config)", endpoint)
+        else:
+            continue
+        exposed.append(endpoint)
     return exposed

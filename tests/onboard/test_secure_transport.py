@@ -7,7 +7,8 @@ import logging
 import pytest
 import zenoh
 
-from onboard.secure_transport import access_control, exposed_without_tls, warn_if_exposed
+from onboard.secure_transport import (access_control, exposed_without_tls, robot_config, warn_if_exposed,
+                                      write_json5)
 from shared.keys import RobotKeys
 from shared.transport import TransportConfig
 
@@ -65,5 +66,16 @@ def test_the_agent_warns_when_it_listens_without_tls_off_loopback(caplog):
     assert "listening on tcp/0.0.0.0:7447 without TLS" in caplog.text
     assert warn_if_exposed(TransportConfig().zenoh()) == ["tcp/[::]:0"]  # Zenoh's own default: every interface
     caplog.clear()
-    assert warn_if_exposed(TransportConfig(listen=("tcp/127.0.0.1:7447", "tls/0.0.0.0:7448")).zenoh()) == []
+    assert warn_if_exposed(TransportConfig(listen=("tcp/127.0.0.1:7447", "tls/127.0.0.1:7448")).zenoh()) == []
+    assert caplog.text == ""
+
+
+def test_the_agent_warns_when_its_tls_listener_lets_anyone_in(caplog, tmp_path):
+    """TLS encrypts; only client certificates and the access-control list say who may drive."""
+    caplog.set_level(logging.WARNING)
+    assert warn_if_exposed(TransportConfig(listen=("tls/0.0.0.0:7448",)).zenoh()) == ["tls/0.0.0.0:7448"]
+    assert "with TLS but without client certificates" in caplog.text
+    caplog.clear()
+    robot = write_json5(tmp_path / "robot.json5", robot_config(tmp_path), "the robot")
+    assert warn_if_exposed(TransportConfig(zenoh_config=robot).zenoh()) == []  # make-certs' config
     assert caplog.text == ""
