@@ -64,6 +64,10 @@ class CommandRefused(Exception):
         self.code = code
 
 
+def _busy(device: str) -> CommandRefused:
+    return CommandRefused("busy", f"the {device} is executing another command; send stop first")
+
+
 class DeviceWorker:
     """One thread per device; ``try_submit`` refuses a job while the previous one runs."""
 
@@ -260,7 +264,7 @@ class Agent:
                 return lambda: self._reply_error(query, command_id, "device", text)
             return lambda: self._reply(query, result, arrays)
         if not self._workers[device].try_submit(run):
-            raise CommandRefused("busy", f"the {device} is executing another command; send stop first")
+            raise _busy(device)
 
     def _on_move(self, query: zenoh.Query, cmd: m.MoveCommand) -> None:
         turn_rad, distance_m = self._resolve_motion(cmd)
@@ -285,7 +289,7 @@ class Agent:
     def _fresh_cancel(self, device: str) -> threading.Event:
         """A new cancel flag for the device's next job (only when it is free: a busy one is refused)."""
         if self._workers[device].busy:
-            raise CommandRefused("busy", f"the {device} is executing another command; send stop first")
+            raise _busy(device)
         cancel = self._cancel[device] = threading.Event()
         if self._shutdown.is_set():  # _close cancelled the flags before this one was in place
             cancel.set()
