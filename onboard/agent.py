@@ -38,7 +38,7 @@ from shared.keys import RobotKeys
 
 log = logging.getLogger(__name__)
 
-_REQUEST_TYPES: dict[str, type] = {
+REQUEST_TYPES: dict[str, type] = {
     "move": m.MoveCommand, "stop": m.StopCommand, "look": m.LookCommand,
     "capture": m.CaptureCommand, "state": m.StateRequest, "info": m.InfoRequest,
     "sim_truth": m.StateRequest, "sim_teleport": m.SimTeleport, "sim_reset": m.SimReset,
@@ -165,7 +165,7 @@ class Agent:
             self._close()
 
     def _declare(self) -> None:
-        for kind in _REQUEST_TYPES:
+        for kind in REQUEST_TYPES:
             if kind in _SIM_ONLY and self._sim is None:
                 continue
             key = getattr(self.keys, kind)
@@ -235,7 +235,7 @@ class Agent:
             kind, query = item
             payload = query.payload.to_bytes() if query.payload is not None else b""
             try:
-                command = decode(payload, _REQUEST_TYPES[kind])
+                command = decode(payload, REQUEST_TYPES[kind])
                 if self._shutdown.is_set():
                     raise CommandRefused("shutdown", "the agent is shutting down")
                 if kind in _PLANNER_COMMANDS:  # a well-formed command, not any bytes on its key

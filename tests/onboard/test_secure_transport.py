@@ -7,6 +7,7 @@ import logging
 import pytest
 import zenoh
 
+from onboard.agent import REQUEST_TYPES
 from onboard.secure_transport import (access_control, exposed_without_tls, robot_config, warn_if_exposed,
                                       write_json5)
 from shared.keys import RobotKeys
@@ -32,8 +33,7 @@ def _allows(role: str, key: str, message: str) -> bool:
                for expr, messages in _granted(role).items())
 
 
-@pytest.mark.parametrize("key", [KEYS.move, KEYS.stop, KEYS.look, KEYS.capture, KEYS.state, KEYS.info,
-                                 KEYS.sim_truth, KEYS.sim_teleport, KEYS.sim_reset])
+@pytest.mark.parametrize("key", [getattr(KEYS, kind) for kind in REQUEST_TYPES])  # every queryable the agent has
 def test_the_planner_may_query_every_command_and_only_the_observer_may_not(key):
     assert _allows("planner", key, "query/ingress") and _allows("planner", key, "reply/egress")
     assert not _allows("observer", key, "query/ingress") and not _allows("observer", key, "declare_queryable/egress")
