@@ -71,7 +71,7 @@ def test_the_zenoh_configs_load_and_flags_override_them():
         path = DEPLOY / name
         zenoh.Config.from_file(str(path))
         config = TransportConfig(zenoh_config=path, connect=("tls/127.0.0.1:7999",)).zenoh()
-        assert "tls/127.0.0.1:7999" in config.get_json("connect/endpoints")
+        assert json.loads(config.get_json("connect/endpoints")) == ["tls/127.0.0.1:7999"]  # replaced, not added to
         assert config.get_json("transport/link/tx/lease") == str(DEFAULT_LEASE_MS)
 
 

@@ -102,8 +102,8 @@ def _raw_get(session: zenoh.Session, key: str, payload: bytes | None):
 
 
 @pytest.mark.parametrize("payload,field", [
-    (b"\x00garbage\xff", ""),
-    (None, ""),
+    (b"\x00garbage\xff", "not a msgpack payload"),
+    (None, "not a msgpack payload"),  # no payload at all
     (msgpack.packb({"schema": 1, "type": "LookCommand", "body": {"command_id": "k1", "pan_deg": float("nan"), "tilt_deg": 0.0}}), "pan_deg"),
     (msgpack.packb({"schema": 1, "type": "LookCommand", "body": {"command_id": "k2", "pan_deg": 1.0, "tilt_deg": 0.0, "zoom": 3}}), "zoom"),
     (encode(m.StopCommand("k3")), "type"),  # right codec, wrong command for this key

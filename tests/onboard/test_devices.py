@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from offboard.perception.stereo import StereoMatcher
 from onboard.backends import build_robot
 from onboard.config import HardwareConfig, OnboardConfig, SimConfig
 from onboard.devices import Devices
@@ -170,6 +171,11 @@ def test_camera_gives_a_rectified_pair_of_the_declared_size(rig):
     assert pair.left.shape == pair.right.shape == (k.height_px, k.width_px, 3)
     assert pair.left.dtype == pair.right.dtype == "uint8"
     assert rig.devices.camera.mount.baseline_m > 0
+    # rectified: the real matcher, which searches along rows only, finds most of the scene at a
+    # positive disparity (a left image twice, or rows out of line, gives none or nothing)
+    disparity = StereoMatcher().disparity(pair.left, pair.right)
+    valid = np.isfinite(disparity) & (disparity > 0)
+    assert valid.mean() > 0.2 and np.median(disparity[valid]) >= 1.0
 
 
 def test_the_camera_sees_where_the_robot_truly_looks(rig):

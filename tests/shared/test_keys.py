@@ -15,4 +15,5 @@ def test_an_id_that_is_not_one_plain_chunk_is_refused(robot_id):
 
 def test_a_plain_id_names_the_robot_s_keys():
     assert check_robot_id("pioneer-3_a") == "pioneer-3_a"
+    assert check_robot_id("x" * 64) == "x" * 64  # the longest allowed
     assert RobotKeys("pioneer-3_a").look.startswith("syt/pioneer-3_a/")
