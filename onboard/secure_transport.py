@@ -168,13 +168,12 @@ def warn_if_exposed(config: zenoh.Config) -> list[str]:
     exposed = []
     for endpoint in filter(reachable, listen_endpoints(config)):
         if exposed_without_tls(endpoint):
-            log.warning("listening on %s without TLS: anyone who can reach it can drive the robot "
-                        "(see README, Security: syt-onboard make-certs and --zenoh-config)", endpoint)
+            how = "without TLS"
         elif not guarded:
-            log.warning("listening on %s with TLS but without client certificates (enable_mtls) and access "
-                        "control: anyone who can reach it can drive the robot (see README, Security: "
-                        "syt-onboard make-certs and --zenoh-config)", endpoint)
+            how = "with TLS but without client certificates (enable_mtls) and access control"
         else:
             continue
+        log.warning("listening on %s %s: anyone who can reach it can drive the robot "
+                    "(see README, Security: syt-onboard make-certs and --zenoh-config)", endpoint, how)
         exposed.append(endpoint)
     return exposed
