@@ -8,7 +8,7 @@ Per frame, for every stereo point (u, v, d):
   world-aligned box around U's eight corners. U is a needle along the ray (at 5 m, 40 cm deep and a
   centimetre wide), so where the ray runs diagonally to the grid that box holds several times the
   cubes U crosses: 60 against 11 looking straight ahead at 5 m, 108 against 13 turned by 45°. The
-  exact count (the cubes the needle's axis crosses, branch ``trial/needle-occupancy``) changed 91 of
+  exact count (the cubes the needle's axis crosses, docs/trials/needle-occupancy.patch) changed 91 of
   `dev`'s 128 runs and SPL by −0.003 (standard error 0.012): see docs/search-experiments.md;
 - every cube between the camera and U gains ``s = miss_log_odds`` (eq. 8);
 - each cube is updated once per frame: the evidence of all the points that touched it, capped at
