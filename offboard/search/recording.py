@@ -184,8 +184,14 @@ class _ViewerLogHandler(logging.Handler):
         self.stream = stream
 
     def emit(self, record: logging.LogRecord) -> None:
-        level = {logging.ERROR: "ERROR", logging.WARNING: "WARN", logging.INFO: "INFO"}.get(record.levelno, "DEBUG")
-        self.stream.log("logs", rr.TextLog(f"{record.name}: {record.getMessage()}", level=level))
+        level = next(name for at_least, name in _LEVELS if record.levelno >= at_least)  # CRITICAL is an error too
+        text = f"{record.name}: {record.getMessage()}"
+        if record.exc_info:
+            text += "\n" + logging.Formatter().formatException(record.exc_info)
+        self.stream.log("logs", rr.TextLog(text, level=level))
+
+
+_LEVELS = ((logging.ERROR, "ERROR"), (logging.WARNING, "WARN"), (logging.INFO, "INFO"), (logging.NOTSET, "DEBUG"))
 
 
 def _transform(t: RigidTransform) -> rr.Transform3D:

@@ -60,3 +60,23 @@ def test_the_recording_shows_at_most_its_share_of_likely_cubes_and_the_likeliest
     shown = np.unique(GRID.index_of(likeliest) @ np.array([GRID.shape[1] * GRID.shape[2], GRID.shape[2], 1]))
     best = hot[np.argsort(weights.flat[hot])[-MAX_PROBABLE_CUBES:]]
     assert len(likeliest) == MAX_PROBABLE_CUBES and set(shown) == set(best)
+
+
+def test_the_recordings_log_panel_keeps_a_critical_records_level_and_its_traceback(tmp_path):
+    """CRITICAL fell to the panel's DEBUG, and a logged exception lost its traceback."""
+    import logging
+
+    rrd = tmp_path / "log.rrd"
+    recorder, logger = Recorder(path=rrd), logging.getLogger("syt.test.recording")
+    recorder.attach_logging(logger)
+    try:
+        raise RuntimeError("the link is gone")
+    except RuntimeError:
+        logger.critical("robot lost", exc_info=True)
+    recorder.detach_logging(logger)
+    recorder.close()
+    texts = [(row, level) for chunk in RrdReader(rrd).stream() if chunk.entity_path == "/logs"
+             for batch in [chunk.to_record_batch()]
+             for row, level in zip(batch.column("TextLog:text").to_pylist(), batch.column("TextLog:level").to_pylist())]
+    (text, level), = [(t[0], lv[0]) for t, lv in texts if "robot lost" in t[0]]
+    assert level == "ERROR" and "RuntimeError: the link is gone" in text
