@@ -16,13 +16,15 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
-from shared.arguments import floats, probability
+from shared.arguments import floats, number, probability
 from shared.config import ConfigError
 from shared.transport import DEFAULT_LEASE_MS, TransportConfig, add_transport_args, transport_from_args
 
@@ -40,6 +42,40 @@ def _prior(spec: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _budget(text: str) -> float:
+    """``--budget-s``, in the range the configuration file's ``planner.budget_s`` must lie in."""
+    from offboard.planning.planner import PlannerConfig  # here: importing the planner costs every command
+
+    lo, hi = next(f.metadata["bounds"] for f in dataclasses.fields(PlannerConfig) if f.name == "budget_s")
+    return number("--budget-s", lo, hi)(text)
+
+
+def _detectability(spec: str) -> str:
+    """``NAME=FILE``: a detector's name and a table it loads, checked before anything connects."""
+    from offboard.perception.detectability import DetectabilityTable
+    from offboard.perception.detection.detector import detector_names
+
+    name, sep, path = spec.partition("=")
+    if not sep or name not in detector_names():
+        raise argparse.ArgumentTypeError(f"--detectability takes NAME=FILE with NAME one of "
+                                         f"{', '.join(detector_names())}, not {spec!r}")
+    try:
+        DetectabilityTable.load(Path(path))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--detectability: {exc}") from None
+    return spec
+
+
+def _new_file(flag: str) -> Callable[[str], Path]:
+    """A file to be written: not a folder, in a folder that exists (checked before the long work)."""
+    def parse(text: str) -> Path:
+        path = Path(text)
+        if path.is_dir() or not path.parent.is_dir():
+            raise argparse.ArgumentTypeError(f"{flag} {text}: needs a file name in an existing folder")
+        return path
+    return parse
+
+
 def _add_search_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--target-picture", action="append", type=Path, metavar="PATH",
                         help="a picture of the target's textured face (repeatable; required unless --resume)")
@@ -54,12 +90,12 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
                         help="cost function (report §5.2.1; default: the configuration's, 3)")
     parser.add_argument("--prior", action="append", default=[], metavar="KIND", type=_prior,
                         help="uniform | hints:FILE | surfaces | saliency | last-seen:X,Y,Z[,S] (repeatable)")
-    parser.add_argument("--budget-s", type=float, metavar="SECONDS",
+    parser.add_argument("--budget-s", type=_budget, metavar="SECONDS",
                         help="robot-time budget K (default: the configuration's, 1800)")
     parser.add_argument("--move-threshold", type=probability("--move-threshold"), default=None, metavar="P",
                         help="Θ_move: move by the report's threshold rule, not the default rate rule")
     parser.add_argument("--detector", choices=("sift", "ncc", "auto"), help="default: the configuration's, sift")
-    parser.add_argument("--detectability", action="append", default=[], metavar="NAME=FILE",
+    parser.add_argument("--detectability", action="append", default=[], metavar="NAME=FILE", type=_detectability,
                         help="a detector's measured detectability table (from calibrate-detector)")
     parser.add_argument("--config", type=Path, metavar="FILE.toml",
                         help="search configuration (SearchConfig); the options above override its values")
@@ -71,12 +107,16 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
 
 
 def _search(args: argparse.Namespace) -> int:
+    from offboard.search.checkpoint import FILE_NAME as CHECKPOINT
     from offboard.search.run import SearchRequest, run_search
 
     if args.resume:
         return _resume(args)
     if not args.target_picture:
         raise SystemExit("syt-offboard search: --target-picture is required (or --resume DIR)")
+    if (args.out / CHECKPOINT).exists() and not (args.out / "summary.json").exists():  # a search cut short there
+        raise ConfigError("--out", str(args.out), "holds an interrupted search (a checkpoint, no summary): carry "
+                                                  "it on with --resume, or choose another --out")
     request = SearchRequest(
         pictures=tuple(args.target_picture), target_size_m=args.target_size, target_sides=args.target_sides,
         room_m=args.room, cost=args.cost,
@@ -281,9 +321,11 @@ def _parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--detector", choices=("sift", "ncc"), default="sift")
     calibrate.add_argument("--target-picture", action="append", type=Path, required=True, metavar="PATH")
     calibrate.add_argument("--target-size", type=floats(3, "--target-size", positive=True), default=(0.23, 0.23, 0.23), metavar="X,Y,Z")
-    calibrate.add_argument("--samples", type=int, default=1, help="views per cell (the first at its centre, the second mirrored, the rest anywhere in it)")
-    calibrate.add_argument("--negatives", type=int, default=200, help="views without the target")
-    calibrate.add_argument("--out", type=Path, required=True, metavar="FILE.json")
+    calibrate.add_argument("--samples", type=number("--samples", 1, 1000, int), default=1,
+                           help="views per cell (the first at its centre, the second mirrored, the rest anywhere in it)")
+    calibrate.add_argument("--negatives", type=number("--negatives", 0, 100_000, int), default=200,
+                           help="views without the target")
+    calibrate.add_argument("--out", type=_new_file("--out"), required=True, metavar="FILE.json")
     calibrate.set_defaults(func=_calibrate)
     from offboard.experiments import harness  # its options live with the harness
 
@@ -315,6 +357,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     from offboard.perception.detection.target_model import TargetModelError
+    from shared.rpc import RobotUnavailable
 
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
@@ -324,6 +367,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, TargetModelError) as exc:  # a bad file or value given: named, not a traceback
         log.error("%s", exc)
         return 2
+    except RobotUnavailable as exc:  # the robot never came, or was lost: its checkpoint, if any, is kept
+        log.error("%s (a search that wrote a checkpoint carries on with --resume DIR)", exc)
+        return 1
 
 
 if __name__ == "__main__":

@@ -22,15 +22,20 @@ def floats(count: int, flag: str, positive: bool = False) -> Callable[[str], tup
     return parse
 
 
-def probability(flag: str) -> Callable[[str], float]:
-    """An argparse type for a probability in [0, 1], e.g. ``--move-threshold 0.05``."""
+def number(flag: str, lo: float, hi: float, kind: type = float) -> Callable[[str], float]:
+    """An argparse type for a number (``kind``: float or int) in [lo, hi], e.g. ``--budget-s 600``."""
 
     def parse(text: str) -> float:
         try:
-            value = float(text)
+            value = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag}: expected a number in [0, 1], got {text!r}") from None
-        if not 0.0 <= value <= 1.0:
-            raise argparse.ArgumentTypeError(f"{flag} must lie in [0, 1], got {text}")
+            raise argparse.ArgumentTypeError(f"{flag}: expected a number in [{lo:g}, {hi:g}], got {text!r}") from None
+        if not lo <= value <= hi:  # NaN fails too
+            raise argparse.ArgumentTypeError(f"{flag} must lie in [{lo:g}, {hi:g}], got {text}")
         return value
     return parse
+
+
+def probability(flag: str) -> Callable[[str], float]:
+    """An argparse type for a probability in [0, 1], e.g. ``--move-threshold 0.05``."""
+    return number(flag, 0.0, 1.0)

@@ -20,7 +20,7 @@ from offboard.perception.detectability import DetectabilityTable
 from offboard.perception.detection.detector import Detector, make_detector, shipped_table
 from offboard.perception.detection.target_model import TargetModel
 from offboard.search.recording import Recorder
-from offboard.robot.robot_client import RobotClient
+from offboard.robot.robot_client import CommandError, RobotClient, RobotUnavailable
 from offboard.search.loop import Search, SearchConfig, build_prior, check_prior_spec
 from offboard.perception.voxel_grid import VoxelGrid
 from shared.config import load_config
@@ -137,6 +137,11 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
     experimenter's hook after every action, before the checkpoint (the harness logs the simulator's
     true pose with it; the search itself never sees it)."""
     out = request.out_dir
+    # what the user named is checked before --out is touched: a failed start must not wipe the last search's log
+    config = search_config(request) if resume is None else resume.config
+    model = TargetModel.from_files(request.pictures, request.target_size_m)
+    from offboard.search.checkpoint import attach  # (it imports this module)
+
     out.mkdir(parents=True, exist_ok=True)
     file_log = logging.FileHandler(out / "search.log", mode="a" if resume else "w")
     file_log.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
@@ -149,8 +154,6 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
             recorder = Recorder(out / rrd if request.record else None, spawn=request.spawn,
                                 connect_url=request.viewer_url)
             recorder.attach_logging(root)
-        config = search_config(request) if resume is None else resume.config
-        model = TargetModel.from_files(request.pictures, request.target_size_m)
         with transport.open() as session, RobotClient(session, transport.robot_id) as robot:
             info = robot.wait_for_robot()
             intrinsics = info.intrinsics.to_intrinsics()
@@ -163,15 +166,15 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
             search = Search(robot, config, detectors, build_prior(grid, list(request.priors)),
                             dynamic_priors(request.priors, grid, model), recorder, model.size_m[0], policy)
             if request.checkpoint or resume:
-                from offboard.search.checkpoint import attach  # (it imports this module)
-
                 attach(search, request, transport, resume)
             if after_action:
                 search.on_action = _chain(functools.partial(after_action, robot=robot), search.on_action)
             try:
                 search.run()
-            finally:
-                robot.stop()
+            except BaseException:  # stop the robot, but tell the error that ended the search, not the stop's
+                _stop_after_failure(robot)
+                raise
+            robot.stop()
             if resume:
                 search.wall_time_s += resume.wall_time_s  # the summary covers the whole search
             summary = {**search.summary(), "prior": "+".join(request.priors)}
@@ -186,6 +189,13 @@ def run_search(transport: TransportConfig, request: SearchRequest, policy=None, 
             recorder.close()
         root.removeHandler(file_log)
         file_log.close()
+
+
+def _stop_after_failure(robot: RobotClient) -> None:
+    try:
+        robot.stop()
+    except (RobotUnavailable, CommandError) as exc:  # a robot that is gone cannot be stopped from here
+        log.error("could not stop the robot after the search failed: %s", exc)
 
 
 def _chain(first: Callable[[Search], None], then: Callable[[Search], None] | None) -> Callable[[Search], None]:

@@ -173,13 +173,50 @@ def test_a_configuration_file_keeps_the_values_no_option_overrides(tmp_path):
     assert (report.planner.move_rule, report.planner.move_threshold) == ("threshold", 0.2)
 
 
+def _picture(folder: Path) -> Path:
+    """The bundled target's picture as a file, as a user gives it."""
+    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(folder / "t.png")],
+                   check=True, capture_output=True)
+    return folder / "t.png"
+
+
+@pytest.mark.parametrize("flag, value, problem", [
+    ("--budget-s", "-5", "--budget-s must lie in [1, 1e+06]"),  # once a search of no action that said "not found"
+    ("--detectability", "sift", "NAME=FILE with NAME one of ncc, sift"),
+    ("--detectability", "sfit=table.json", "not 'sfit=table.json'"),  # once ignored: the shipped table was used
+    ("--detectability", "sift=missing.json", "missing.json: not a detectability table"),  # once a traceback, connected
+])
+def test_the_command_line_refuses_a_bad_search_value_by_name_before_it_connects(capsys, flag, value, problem):
+    from offboard.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["search", "--target-picture", "t.png", flag, value])
+    assert exit_.value.code == 2 and problem in capsys.readouterr().err
+
+
+def test_a_search_into_an_interrupted_searchs_folder_is_refused_and_a_failed_start_keeps_the_last_log(tmp_path, caplog):
+    from offboard.cli import main
+
+    picture = _picture(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "search.log").write_text("the last search's log")
+    assert main(["search", "--target-picture", str(tmp_path / "nosuch.png"), "--out", str(out)]) == 2
+    assert (out / "search.log").read_text() == "the last search's log"  # was emptied before the picture was read
+    (out / "checkpoint.syt").write_bytes(b"a search cut short")
+    assert main(["search", "--target-picture", str(picture), "--out", str(out)]) == 2
+    assert "holds an interrupted search" in caplog.text and "--resume" in caplog.text
+    assert (out / "checkpoint.syt").read_bytes() == b"a search cut short"
+
+
 def test_a_recording_that_cannot_start_leaves_no_log_handler_behind(tmp_path):
     import logging
 
     from offboard.search.run import SearchRequest, run_search
 
     (tmp_path / "search.rrd").mkdir()  # the recording's file cannot be made
-    request = SearchRequest(pictures=(Path("t.png"),), target_size_m=(0.23, 0.23, 0.23), out_dir=tmp_path, record=True)
+    picture = _picture(tmp_path)
+    request = SearchRequest(pictures=(picture,), target_size_m=(0.23, 0.23, 0.23), out_dir=tmp_path, record=True)
     before = list(logging.getLogger().handlers)
     with pytest.raises(RuntimeError, match="search.rrd"):
         run_search(TransportConfig(connect=("tcp/127.0.0.1:9",), multicast_scouting=False), request)
