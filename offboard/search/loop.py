@@ -627,8 +627,9 @@ def build_prior(grid: VoxelGrid, specs: list[str]) -> np.ndarray:
         if kind == "uniform":
             weighted.append((1.0, priors.uniform(grid)))
         elif kind == "hints":
+            boxes = load_config(priors.HintsFile, Path(arg)).hint  # its errors name the file already
             try:
-                weighted.append((1.0, priors.hints(grid, load_config(priors.HintsFile, Path(arg)).hint)))
+                weighted.append((1.0, priors.hints(grid, boxes)))
             except ValueError as exc:  # a box the room's cubes miss
                 raise ConfigError(arg, None, str(exc)) from None
         elif kind == "last-seen":

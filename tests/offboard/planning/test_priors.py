@@ -100,3 +100,11 @@ def test_a_hint_box_the_rooms_cubes_miss_is_refused_naming_it(tmp_path):
     path.write_text('[[hint]]\nname = "shelf"\nmin = [0.2, 0.2, 0.51]\nmax = [0.6, 0.6, 0.52]\nweight = 0.9\n')
     with pytest.raises(ConfigError, match="hints.toml.*shelf.*no cube centre"):
         build_prior(VoxelGrid((2.0, 2.0, 1.0), 0.05), [f"hints:{path}"])
+
+
+def test_a_broken_hints_file_is_named_once(tmp_path):
+    path = tmp_path / "hints.toml"
+    path.write_text("[[hint]]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nweight = 2.0\n")
+    with pytest.raises(ConfigError) as err:
+        build_prior(VoxelGrid((2.0, 2.0, 1.0), 0.05), [f"hints:{path}"])
+    assert str(err.value).count(str(path)) == 1 and "hint[0].weight: out of range" in str(err.value)
