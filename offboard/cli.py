@@ -53,14 +53,14 @@ def _budget(text: str) -> float:
 def _detectability(spec: str) -> str:
     """``NAME=FILE``: a detector's name and a table it loads, checked before anything connects."""
     from offboard.perception.detectability import DetectabilityTable
-    from offboard.perception.detection.detector import detector_names
+    from offboard.search.run import detectability_file
 
-    name, sep, path = spec.partition("=")
-    if not sep or name not in detector_names():
-        raise argparse.ArgumentTypeError(f"--detectability takes NAME=FILE with NAME one of "
-                                         f"{', '.join(detector_names())}, not {spec!r}")
     try:
-        DetectabilityTable.load(Path(path))
+        _, path = detectability_file(spec)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    try:
+        DetectabilityTable.load(path)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"--detectability: {exc}") from None
     return spec

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 from offboard.planning import priors
 from offboard.perception.detectability import DetectabilityTable
-from offboard.perception.detection.detector import Detector, make_detector, shipped_table
+from offboard.perception.detection.detector import Detector, detector_names, make_detector, shipped_table
 from offboard.perception.detection.target_model import TargetModel
 from offboard.search.recording import Recorder
 from offboard.robot.robot_client import CommandError, RobotClient, RobotUnavailable
@@ -92,7 +92,7 @@ def detectability_table(name: str, detector: Detector, files: dict[str, Path]) -
 def build_detectors(detector: str, request: SearchRequest, model: TargetModel, intrinsics: Intrinsics) -> dict:
     """The detectors ``detector`` names ("auto": both), each with its detectability table for the
     target's size."""
-    files = dict(_name_file(spec) for spec in request.detectability)
+    files = dict(detectability_file(spec) for spec in request.detectability)
     names = ("sift", "ncc") if detector == "auto" else (detector,)
     detectors = {}
     for name in names:
@@ -206,9 +206,11 @@ def _chain(first: Callable[[Search], None], then: Callable[[Search], None] | Non
     return both
 
 
-def _name_file(spec: str) -> tuple[str, Path]:
+def detectability_file(spec: str) -> tuple[str, Path]:
+    """``--detectability NAME=FILE``: the detector's name and its table's file (not read here)."""
     name, sep, path = spec.partition("=")
-    if not sep:
-        raise ValueError(f"--detectability takes NAME=FILE, not {spec!r}")
+    if not sep or name not in detector_names():  # a mistyped name's table would be ignored, unsaid
+        raise ValueError(f"--detectability takes NAME=FILE with NAME one of {', '.join(detector_names())}, "
+                         f"not {spec!r}")
     return name, Path(path)
 
