@@ -186,7 +186,8 @@ class OccupancyGrid:
         """Walk each ray to the first occupied cube (or the room's boundary, or ``max_range_m``);
         unknown space does not stop it (the expected sensed spheres' optimistic choice)."""
         origins, dirs = np.atleast_2d(origins_m).astype(np.float64), np.atleast_2d(directions).astype(np.float64)
-        if origins.shape[1:] != (3,) or dirs.shape[1:] != (3,) or 1 < len(origins) != len(dirs) > 1:
+        paired = len(origins) == len(dirs) or 1 in (len(origins), len(dirs))  # else numpy broadcasting fails
+        if origins.shape[1:] != (3,) or dirs.shape[1:] != (3,) or not paired:
             raise ValueError(f"rays need one origin or one per direction, each a 3-vector: got origins "
                              f"{origins.shape} and directions {dirs.shape}")  # the kernel checks no bounds
         norms = np.linalg.norm(dirs, axis=1, keepdims=True)
