@@ -45,6 +45,17 @@ def wait_until(predicate, timeout_s: float, poll_s: float = 0.02) -> bool:
     return False
 
 
+def bundled_picture(folder: Path, name: str = "target.png") -> Path:
+    """The bundled target's picture written as a file, as a user gives one (``syt-onboard picture``)."""
+    import subprocess
+    import sys
+
+    path = folder / name
+    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(path)], check=True,
+                   capture_output=True)
+    return path
+
+
 def experiment_args(*argv: str):
     """``syt-offboard experiment``'s arguments as its command line parses them."""
     import argparse

@@ -3,9 +3,6 @@ varies smoothly, and a real calibration on a simulated robot."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -13,7 +10,7 @@ from offboard.perception import calibration
 from offboard.perception.calibration import CalibrationGrid, pooled_rate, view_angles
 from offboard.perception.detection.detector import make_detector
 from offboard.perception.detection.target_model import TargetModel
-from conftest import running_agent
+from conftest import bundled_picture, running_agent
 
 
 def test_a_rate_pools_the_cells_around_it_and_counts_one_miss_more_than_seen():
@@ -42,8 +39,7 @@ def test_a_cells_views_are_its_centre_mirrored_then_spread_over_it():
 
 
 def test_a_small_calibration_on_a_simulated_robot_finds_the_target_head_on_and_not_edge_on(tmp_path):
-    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(tmp_path / "target.png")],
-                   check=True, capture_output=True)
+    bundled_picture(tmp_path)
     size = (0.23, 0.23, 0.23)
     world = tmp_path / "calibration.toml"
     world.write_text(calibration.calibration_world("target.png", size, 1.2))

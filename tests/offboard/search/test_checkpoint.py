@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import saved_and_read, search_on
+from conftest import bundled_picture, saved_and_read, search_on
 from offboard.bench.safety import Observer
 from offboard.navigation.localization import PoseTracker
 from offboard.perception.detection import TargetModel
@@ -227,9 +227,7 @@ def _wait_for_actions(out: Path, actions: int, process: subprocess.Popen, timeou
 @pytest.mark.long
 @pytest.mark.integration
 def test_a_search_killed_mid_way_resumes_from_its_checkpoint_and_finds_the_target(tmp_path):
-    out, picture = tmp_path / "out", tmp_path / "target.png"
-    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(picture)], check=True,
-                   capture_output=True)
+    out, picture = tmp_path / "out", bundled_picture(tmp_path)
     with onboard_agent(["--backend", "sim", "--world", "paper-lab", "--start", START], tmp_path / "onboard.log") as agent:
         with TransportConfig(connect=(agent.endpoint,), multicast_scouting=False).open() as session:
             agent.wait_ready(session, "syt")

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
+from conftest import bundled_picture
 from onboard.sim.world import load_world
 from shared.launch import onboard_agent
 from shared.transport import TransportConfig
@@ -28,9 +29,7 @@ WORLDS = [("paper-lab", None), ("office", None), ("high-shelf", None)]
 
 def _search(tmp_path: Path, world: str, *agent_args: str, extra: tuple[str, ...] = ()) -> tuple[dict, Path]:
     out = tmp_path / "out"
-    picture = tmp_path / "target.png"
-    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(picture)], check=True,
-                   capture_output=True)
+    picture = bundled_picture(tmp_path)
     size = load_world(world).room.size_m
     with onboard_agent(["--backend", "sim", "--world", world, *agent_args], tmp_path / "onboard.log") as agent:
         with TransportConfig(connect=(agent.endpoint,), multicast_scouting=False).open() as session:
@@ -173,13 +172,6 @@ def test_a_configuration_file_keeps_the_values_no_option_overrides(tmp_path):
     assert (report.planner.move_rule, report.planner.move_threshold) == ("threshold", 0.2)
 
 
-def _picture(folder: Path) -> Path:
-    """The bundled target's picture as a file, as a user gives it."""
-    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(folder / "t.png")],
-                   check=True, capture_output=True)
-    return folder / "t.png"
-
-
 @pytest.mark.parametrize("flag, value, problem", [
     ("--budget-s", "-5", "--budget-s must lie in [1, 1e+06]"),  # once a search of no action that said "not found"
     ("--detectability", "sift", "NAME=FILE with NAME one of ncc, sift"),
@@ -197,7 +189,7 @@ def test_the_command_line_refuses_a_bad_search_value_by_name_before_it_connects(
 def test_a_search_into_an_interrupted_searchs_folder_is_refused_and_a_failed_start_keeps_the_last_log(tmp_path, caplog):
     from offboard.cli import main
 
-    picture = _picture(tmp_path)
+    picture = bundled_picture(tmp_path)
     out = tmp_path / "out"
     out.mkdir()
     (out / "search.log").write_text("the last search's log")
@@ -215,7 +207,7 @@ def test_a_recording_that_cannot_start_leaves_no_log_handler_behind(tmp_path):
     from offboard.search.run import SearchRequest, run_search
 
     (tmp_path / "search.rrd").mkdir()  # the recording's file cannot be made
-    picture = _picture(tmp_path)
+    picture = bundled_picture(tmp_path)
     request = SearchRequest(pictures=(picture,), target_size_m=(0.23, 0.23, 0.23), out_dir=tmp_path, record=True)
     before = list(logging.getLogger().handlers)
     with pytest.raises(RuntimeError, match="search.rrd"):
@@ -228,9 +220,8 @@ def test_a_recording_that_cannot_start_leaves_no_log_handler_behind(tmp_path):
     ("40,40,4", "room_m: 51,200,000 cubes of 0.05 m, more than 20,000,000: give a coarser resolution_m"),
 ])
 def test_a_room_too_large_to_hold_is_refused_by_name_before_it_connects(tmp_path, room, problem):
-    subprocess.run([sys.executable, "-m", "onboard.cli", "picture", "target", "--out", str(tmp_path / "t.png")],
-                   check=True, capture_output=True)
-    done = subprocess.run([sys.executable, "-m", "offboard.cli", "search", "--target-picture", str(tmp_path / "t.png"),
+    picture = bundled_picture(tmp_path)
+    done = subprocess.run([sys.executable, "-m", "offboard.cli", "search", "--target-picture", str(picture),
                            "--room", room, "--out", str(tmp_path / "out"), "--connect", "tcp/127.0.0.1:9",
                            "--no-multicast-scouting"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and problem in done.stderr and "Traceback" not in done.stderr, done.stderr
