@@ -294,7 +294,7 @@ class Search:
         log.info("decision %d: %s — %s (P=%.3f, t=%.1f s)", len(self.state.planning_ms), decision.kind,
                  decision.reason, decision.find_prob, decision.time_s)
         if self.recorder and decision.values is not None:
-            self.recorder.log_plan(decision.values, self.planner.positions)
+            self.recorder.log_plan(decision.values, self.planner.positions, self.belief.grid)
         return decision
 
     def _move(self, decision: Decision) -> None:

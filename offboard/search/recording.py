@@ -9,7 +9,8 @@ Entity tree (it mirrors the frame tree):
 - ``world/occupancy`` — occupied cubes coloured by log-odds; ``world/target_prob`` — the most likely
   cubes coloured by probability; ``world/path``, ``world/looks``, ``world/target_estimate``;
 - ``maps/target_prob`` — the column-sum target probability map; ``maps/position_prob`` — the
-  candidate positions (metres) coloured by covering probability (report §5.1);
+  candidate positions coloured by covering probability (report §5.1). Both maps share one frame,
+  the map's pixels (one per cube, x to the right and y up), so a position and its column line up;
 - ``plan/utility`` — every action's expected detection probability; ``stats/…`` — scalars;
 - ``logs`` — Python logging.
 
@@ -29,6 +30,7 @@ import rerun.blueprint as rrb
 from offboard.planning.action_values import ActionValues
 from offboard.planning.belief import TargetBelief
 from offboard.perception.occupancy import OccupancyGrid
+from offboard.perception.voxel_grid import VoxelGrid
 from offboard.perception.observation import Observation
 from shared.geometry import HeadMount, Intrinsics, Pose2D, RigidTransform
 
@@ -161,14 +163,14 @@ class Recorder:
                                               fill_mode="solid"))
         s.log("maps/target_prob", rr.Image(_to_image(prob.sum(axis=2))))  # the report's map: each column's sum
 
-    def log_plan(self, values: ActionValues, positions: np.ndarray) -> None:
+    def log_plan(self, values: ActionValues, positions: np.ndarray, grid: VoxelGrid) -> None:
         """Every action's expected detection probability, and the candidate positions (the report's
         grid vertices and the viewpoints aimed at the belief, in metres) coloured by covering
-        probability."""
+        probability, drawn in the target map's pixels."""
         s = self.stream
         s.log("plan/utility", rr.BarChart(values.find_prob[:-1].reshape(-1)))
         covering = values.covering_prob[:-1]
-        s.log("maps/position_prob", rr.Points2D(positions, radii=0.1,
+        s.log("maps/position_prob", rr.Points2D(_map_pixels(grid, positions), radii=0.1 / grid.resolution_m,
                                                 colors=_ramp(covering, max(float(covering.max(initial=0.0)), 1e-12), hot=True)))
 
     def log_stats(self, **scalars: float) -> None:
@@ -214,6 +216,13 @@ def _ramp(values: np.ndarray, top: float, hot: bool = False) -> np.ndarray:
     if hot:
         return (np.stack([255 * np.ones_like(t), 255 * (1 - t), 40 * np.ones_like(t)], axis=-1)).astype(np.uint8)
     return (np.stack([80 + 100 * t, 80 + 100 * t, 90 + 120 * t], axis=-1)).astype(np.uint8)
+
+
+def _map_pixels(grid: VoxelGrid, xy_m: np.ndarray) -> np.ndarray:
+    """Floor points (metres) in the pixels of :func:`_to_image`'s map of ``grid``: a point in cube
+    column (i, j) lands in that column's pixel, whose centre is (i + 0.5, ny - j - 0.5)."""
+    scaled = (np.asarray(xy_m, float).reshape(-1, 2) - grid.origin[:2]) / grid.resolution_m
+    return np.column_stack([scaled[:, 0], grid.shape[1] - scaled[:, 1]])
 
 
 def _to_image(values: np.ndarray) -> np.ndarray:

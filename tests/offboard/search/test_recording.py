@@ -80,3 +80,28 @@ def test_the_recordings_log_panel_keeps_a_critical_records_level_and_its_traceba
              for row, level in zip(batch.column("TextLog:text").to_pylist(), batch.column("TextLog:level").to_pylist())]
     (text, level), = [(t[0], lv[0]) for t, lv in texts if "robot lost" in t[0]]
     assert level == "ERROR" and "RuntimeError: the link is gone" in text
+
+
+def test_the_position_map_lines_up_with_the_target_map(tmp_path):
+    """The target map is drawn with y up and the positions were drawn with y down (Rerun's 2D
+    default), so a position beside the likeliest column showed on the map's other side."""
+    from offboard.planning.action_values import ActionValues
+
+    grid = VoxelGrid((3.0, 2.0, 1.5), 0.05, origin_m=(1.0, -0.5, 0.0))
+    weights = np.ones(grid.shape)
+    weights[10, 30, :] = 1000.0  # one likely column, far from the map's middle
+    belief = TargetBelief(grid, facing_sectors=1)
+    belief.set_prior(weights, prob_outside=0.0)
+    column_xy = grid.center_of(np.array([10, 30, 0]))[:2]
+    rrd = tmp_path / "plan.rrd"
+    recorder = Recorder(path=rrd)
+    recorder.log_maps(belief, OccupancyGrid(grid))
+    recorder.log_plan(ActionValues(np.zeros((2, 3)), np.array([1.0, 0.5, 0.0])),
+                      np.array([column_xy, [2.0, 0.0]]), grid)
+    recorder.close()
+
+    image = _logged(rrd, "/maps/target_prob", "Image:buffer").astype(np.uint8)
+    image = image.reshape(grid.shape[1], grid.shape[0])  # rows are y, columns x
+    row, col = np.unravel_index(np.argmax(image), image.shape)
+    points = _logged(rrd, "/maps/position_prob", "Points2D:positions")
+    assert np.allclose(points[0], [col + 0.5, row + 0.5], atol=1e-6)
