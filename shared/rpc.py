@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any, TypeVar
 
 import zenoh
@@ -30,6 +31,7 @@ def request(session: zenoh.Session, key: str, command: Any, expected: type[T], t
     """Send ``command`` to the queryable at ``key``, naming its ``sender`` (a planner's id, as its
     heartbeats do: the agent's watchdog keeps a motion alive on its sender's word only); return the
     decoded reply or raise."""
+    started = time.monotonic()
     replies = session.get(key, payload=encode(command), timeout=timeout_s, attachment=sender)
     for reply in replies:
         if reply.ok is not None:
@@ -44,5 +46,9 @@ def request(session: zenoh.Session, key: str, command: Any, expected: type[T], t
         except ProtocolError:  # not the agent's answer: Zenoh's own (a timeout, a dropped route)
             raise RobotUnavailable(f"{key}: {payload[:200].decode('utf-8', 'replace')}") from None
         raise CommandError(key, error)
+    waited_s = time.monotonic() - started
+    if waited_s < timeout_s:  # Zenoh ended the query early: nobody serves the key, or its server went away
+        raise RobotUnavailable(f"nobody answered {key} (the query ended after {waited_s:.1f} s of its {timeout_s:g}): "
+                               "is the onboard agent running and reachable (--connect/--listen)?")
     raise RobotUnavailable(f"no reply from {key} within {timeout_s:g} s: is the onboard agent running "
                            "and reachable (--connect/--listen)?")

@@ -263,3 +263,28 @@ def test_a_search_killed_mid_way_resumes_from_its_checkpoint_and_finds_the_targe
     looks = (out / "looks.jsonl").read_text().splitlines()
     assert [json.loads(line)["action"] for line in looks] == list(range(1, summary["actions"] + 1))
     assert "resumed after action" in (out / "search.log").read_text()
+
+
+@pytest.mark.integration
+def test_a_robot_lost_mid_search_ends_it_with_one_error_and_keeps_its_checkpoint(tmp_path):
+    """The `stop` sent after the failure raised again and replaced the first error with its own."""
+    out, picture = tmp_path / "out", bundled_picture(tmp_path)
+    with onboard_agent(["--backend", "sim", "--world", "paper-lab", "--start", START], tmp_path / "onboard.log") as agent:
+        with TransportConfig(connect=(agent.endpoint,), multicast_scouting=False).open() as session:
+            agent.wait_ready(session, "syt")
+        search = subprocess.Popen(
+            [sys.executable, "-m", "offboard.cli", "search", "--connect", agent.endpoint, "--no-multicast-scouting",
+             "--target-picture", str(picture), "--target-sides", "4", "--room", "9,5,2.5", "--out", str(out)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        try:
+            _wait_for_actions(out, 2, search, timeout_s=60)
+            agent.process.kill()
+            _, stderr = search.communicate(timeout=60)
+        finally:
+            search.kill()
+    assert search.returncode == 1, stderr[-3000:]
+    assert "Traceback" not in stderr and "--resume" in stderr
+    errors = [line for line in stderr.splitlines() if " ERROR syt.offboard:" in line]
+    assert len(errors) == 1 and "nobody answered" in errors[0], stderr[-3000:]
+    assert "/stop" not in errors[0], "the failure to stop a lost robot hid the failure that lost it"
+    assert checkpoint.read(out).actions >= 2 and not (out / "summary.json").exists()
