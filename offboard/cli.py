@@ -101,7 +101,8 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
                         help="search configuration (SearchConfig); the options above override its values")
     parser.add_argument("--out", type=Path, default=Path("search-out"), metavar="DIR")
     parser.add_argument("--resume", type=Path, metavar="DIR",
-                        help="carry on the search checkpointed in DIR (its own options; transport flags override)")
+                        help="carry on the search checkpointed in DIR with its own options (a transport flag given replaces "
+                             "its saved setting)")
     parser.add_argument("--spawn", action="store_true", help="stream the recording to a new Rerun viewer")
     parser.add_argument("--connect-viewer", metavar="URL", help="stream the recording to a running Rerun viewer")
 
@@ -129,20 +130,33 @@ def _search(args: argparse.Namespace) -> int:
 
 
 def _resume(args: argparse.Namespace) -> int:
-    """Carry on from ``--resume DIR``: the checkpoint's request and transport (flags given replace the
-    latter), the robot's odometry continuing; the summary covers the whole search."""
+    """Carry on from ``--resume DIR``: the checkpoint's request and transport (each transport flag
+    given replaces its saved setting), the robot's odometry continuing; the summary covers the whole
+    search."""
     from offboard.search.checkpoint import CheckpointError, read
     from offboard.search.run import run_search
 
-    given = transport_from_args(args)
+    given = _search_options_given(args)
+    if given:
+        raise ConfigError("--resume", given, "a resumed search carries on with the options it was started with: "
+                                             "only transport flags may be given with it")
     try:
         checkpoint = read(args.resume)
-        summary = run_search(checkpoint.transport if given == TransportConfig() else given, checkpoint.request,
+        summary = run_search(checkpoint.transport.overridden_by(transport_from_args(args)), checkpoint.request,
                              resume=checkpoint)
     except CheckpointError as exc:  # read, or restored into the search before the robot moves
         raise SystemExit(f"syt-offboard search --resume: {exc}") from None
     sys.stdout.write(json.dumps(summary) + "\n")
     return 0 if summary["found"] else 3
+
+
+def _search_options_given(args: argparse.Namespace) -> list[str]:
+    """The search options (not transport flags) that ``args`` sets off their defaults, as flags."""
+    scratch = argparse.ArgumentParser(add_help=False)
+    _add_search_args(scratch)
+    defaults = vars(scratch.parse_args([]))
+    return ["--" + dest.replace("_", "-") for dest, default in defaults.items()
+            if dest != "resume" and getattr(args, dest) != default]
 
 
 # --- demo and tour ---------------------------------------------------------------------------------

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Literal
 
@@ -71,6 +71,14 @@ class TransportConfig:
                     f"{_GOSSIP}/autoconnect": gossip,
                     "connect/endpoints": list(self.connect) or None, "listen/endpoints": list(self.listen) or None}
         return {key: value for key, value in settings.items() if value is not None}
+
+    def overridden_by(self, given: TransportConfig) -> TransportConfig:
+        """This configuration with each setting that ``given`` moves off its default put in its place:
+        a resumed search keeps its saved robot and TLS file when only ``--connect`` is given anew."""
+        default = TransportConfig()
+        changed = {f.name: getattr(given, f.name) for f in fields(self)
+                   if getattr(given, f.name) != getattr(default, f.name)}
+        return replace(self, **changed)
 
     def open(self) -> zenoh.Session:
         log.info("opening Zenoh session: mode=%s connect=%s listen=%s scouting=%s",

@@ -52,3 +52,17 @@ def test_gossip_connects_nobody_unless_the_file_configures_it(tmp_path):
     path = tmp_path / "gossip.json5"
     path.write_text("{ scouting: { gossip: { multihop: true } } }")
     assert json.loads(TransportConfig(zenoh_config=path).zenoh().get_json(autoconnect)) is None  # Zenoh's default
+
+
+def test_flags_given_on_a_resume_replace_only_their_own_saved_settings(tmp_path):
+    """Any flag used to throw the whole saved transport away: `--connect` alone lost the robot's id
+    and its TLS file, so the resumed search could not reach the robot."""
+    saved = TransportConfig(robot_id="pioneer1", connect=("tls/robot:7447",), zenoh_config=tmp_path / "tls.json5",
+                            multicast_scouting=False, lease_ms=1500)
+    parser = argparse.ArgumentParser()
+    add_transport_args(parser)
+    given = transport_from_args(parser.parse_args(["--connect", "tls/10.0.0.9:7447"]))
+    assert saved.overridden_by(given) == TransportConfig(
+        robot_id="pioneer1", connect=("tls/10.0.0.9:7447",), zenoh_config=tmp_path / "tls.json5",
+        multicast_scouting=False, lease_ms=1500)
+    assert saved.overridden_by(transport_from_args(parser.parse_args([]))) == saved

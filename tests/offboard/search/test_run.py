@@ -186,6 +186,13 @@ def test_the_command_line_refuses_a_bad_search_value_by_name_before_it_connects(
     assert exit_.value.code == 2 and problem in capsys.readouterr().err
 
 
+def test_a_search_option_given_with_resume_is_refused_by_name_not_ignored(tmp_path, caplog):
+    from offboard.cli import main
+
+    assert main(["search", "--resume", str(tmp_path), "--budget-s", "60", "--connect", "tcp/127.0.0.1:1"]) == 2
+    assert "--resume" in caplog.text and "'--budget-s'" in caplog.text and "--connect" not in caplog.text
+
+
 def test_a_search_into_an_interrupted_searchs_folder_is_refused_and_a_failed_start_keeps_the_last_log(tmp_path, caplog):
     from offboard.cli import main
 
