@@ -30,8 +30,7 @@ import zenoh
 
 from onboard import signals
 from onboard.config import OnboardConfig
-from onboard.devices import Devices, SimControl
-from onboard.hardware.fault import DeviceFault
+from onboard.devices import DeviceFault, Devices, SimControl
 from shared import messages as m
 from shared.codec import ProtocolError, decode, encode
 from shared.keys import RobotKeys

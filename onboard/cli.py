@@ -90,7 +90,7 @@ def run_agent(argv: list[str]) -> int:
         return 2
     from onboard.agent import Agent
     from onboard.backends import build_robot
-    from onboard.hardware.fault import DeviceFault
+    from onboard.devices import DeviceFault
     from onboard.hardware.stereo_rig import CalibrationFileError
 
     try:

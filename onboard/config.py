@@ -13,11 +13,11 @@ world = "paper-lab"
 realtime = false
 [sim.odometry_noise]
 distance_frac = 0.02
-[hardware.base]   # onboard.hardware.pioneer.PioneerConfig; used when backend = "hardware"
+[hardware.base]   # PioneerConfig (below); used when backend = "hardware"
 port = "/dev/pioneer"   # a device path, a pyserial URL ("socket://127.0.0.1:8101") or "sim"
-[hardware.pantilt] # onboard.hardware.ptu.PtuConfig
+[hardware.pantilt] # PtuConfig
 port = "/dev/ptu"       # or "sim"
-[hardware.camera]  # onboard.hardware.uvc_camera.UvcStereoConfig
+[hardware.camera]  # UvcStereoConfig
 device = "/dev/video0"  # or "sim"
 calibration = "stereo.yaml"
 ```
@@ -28,9 +28,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from onboard.hardware.pioneer import PioneerConfig
-from onboard.hardware.ptu import PtuConfig
-from onboard.hardware.uvc_camera import UvcStereoConfig
 from shared.geometry import HeadMount, Intrinsics
 from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
 from shared.messages import HEARTBEAT_PERIOD_S
@@ -72,6 +69,50 @@ class SimConfig:
     seed: int = field(default=0, metadata=bounds(0, 2**63 - 1))  # odometry noise (numpy takes no negative seed)
     step_s: float = field(default=0.02, metadata=bounds(1e-3, 0.5))  # physics step of robot time
     odometry_noise: OdometryNoise = OdometryNoise()
+
+
+@dataclass(frozen=True)
+class PioneerConfig:
+    """``[hardware.base]``: where the Pioneer is and how the driver talks to it."""
+
+    port: str = "sim"  # a device path, a pyserial URL ("socket://127.0.0.1:8101"), or "sim" for the simulator
+    baud: int = field(default=9600, metadata=bounds(1200, 921600))  # ARCOS talks 9600 after power-up
+    sync_reply_timeout_ms: int = field(default=1000, metadata=bounds(10, 10_000))  # ARIA waits 1 s per echo
+    sync_attempts: int = field(default=4, metadata=bounds(1, 100))
+    stale_session_wait_ms: int = field(default=500, metadata=bounds(0, 10_000))  # after CLOSE to an old session
+    link_timeout_ms: int = field(default=1000, metadata=bounds(200, 60_000))  # no SIP this long: link down
+    reconnect_period_ms: int = field(default=1000, metadata=bounds(50, 60_000))
+    pulse_period_ms: int = field(default=500, metadata=bounds(50, 1900))  # idle keep-alive (the robot halts at 2 s)
+    resend_period_ms: int = field(default=500, metadata=bounds(50, 1900))  # motion commands repeated, as ARIA does
+    command_gap_ms: float = field(default=4.0, metadata=bounds(0.0, 50.0))  # ARCOS takes one command every 3-5 ms
+    turn_tolerance_deg: float = field(default=1.0, metadata=bounds(0.1, 20.0))
+    drive_tolerance_m: float = field(default=0.02, metadata=bounds(0.001, 0.5))
+    motion_timeout_margin_s: float = field(default=5.0, metadata=bounds(0.5, 600.0))  # beyond the profile's time
+
+
+@dataclass(frozen=True)
+class PtuConfig:
+    """``[hardware.pantilt]``; the slew speeds come from ``[pantilt]`` so the time model matches."""
+
+    port: str = "sim"  # a device path or a pyserial URL (socket://HOST:PORT); "sim" = simulated
+    baud: int = field(default=9600, metadata=bounds(1200, 115_200))  # the unit's power-up rate
+    reply_timeout_s: float = field(default=0.5, metadata=bounds(0.01, 10.0))  # one command's answer
+    startup_timeout_s: float = field(default=30.0, metadata=bounds(0.1, 120.0))  # self-calibration
+    move_timeout_s: float = field(default=15.0, metadata=bounds(0.5, 120.0))  # beyond the slew the speeds give
+    poll_s: float = field(default=0.05, metadata=bounds(0.001, 1.0))  # position polling during a look
+
+
+@dataclass(frozen=True)
+class UvcStereoConfig:
+    """``[hardware.camera]``."""
+
+    device: str = "sim"  # /dev/video0, a camera index, a video file or image sequence; "sim" = simulated
+    calibration: str = "stereo.yaml"  # OpenCV YAML from calibrate-stereo
+    width_px: int = field(default=1280, metadata=bounds(32, 8192))  # the side-by-side frame: both images
+    height_px: int = field(default=480, metadata=bounds(16, 4096))
+    fps: float = field(default=30.0, metadata=bounds(1.0, 240.0))
+    stale_frames: int = field(default=2, metadata=bounds(0, 30))  # dropped before a capture: UVC queues frames
+    swap_halves: bool = False  # True if the camera puts the right image in the left half
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""One interface per device, shared by every backend (simulator today, serial hardware next).
+"""One interface per device, shared by every backend (the simulator and the serial hardware), and
+the one error a device raises when it cannot serve.
 
 The agent talks only to these protocols, so the planner never knows which backend answers it.
 Angles are radians here; the wire (degrees) is the agent's business.
@@ -17,6 +18,14 @@ from shared.geometry import HeadMount, Intrinsics, Pose2D
 from shared.limits import BaseLimits, PanTiltLimits
 
 log = logging.getLogger(__name__)
+
+
+class DeviceFault(RuntimeError):
+    """The device is unreachable or misbehaving (link down, no reply, refused command).
+
+    The agent answers any exception from a device with an ``ErrorReply`` of code ``device``; the
+    message says which device and what went wrong.
+    """
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,8 @@ import logging
 
 from serial.tools import list_ports
 
+from onboard.devices import DeviceFault
 from onboard.hardware import pioneer, ptu, uvc_camera
-from onboard.hardware.fault import DeviceFault
 
 log = logging.getLogger(__name__)
 

@@ -20,7 +20,10 @@ OFFBOARD_LAYERS = {
     "bench": {"robot", "perception", "planning", "navigation", "search", "experiments"},
     "fuzz": {"robot", "perception", "planning", "navigation", "search", "experiments"},
 }
-PURE = {"planning": {"zenoh", "rerun"}}  # the planner does no I/O: no transport, no recording
+PURE = {"planning": {"zenoh", "rerun"}}
+# onboard backend -> the onboard modules it must not import: a robot runs its drivers without the
+# simulator, and the simulator runs without the drivers (both share onboard.devices and onboard.config)
+ONBOARD_BACKENDS = {"sim": ("onboard.hardware", "onboard.emulators"), "hardware": ("onboard.sim", "onboard.emulators")}  # the planner does no I/O: no transport, no recording
 
 
 def _imported_modules(path: Path) -> set[str]:
@@ -73,6 +76,16 @@ def test_pure_layers_do_no_io(layer):
     files = sorted((ROOT / "offboard" / layer).rglob("*.py"))
     assert files, f"no sources found under offboard/{layer}/"
     offenders = {str(f.relative_to(ROOT)): sorted(_imported_packages(f) & PURE[layer]) for f in files}
+    assert {f: bad for f, bad in offenders.items() if bad} == {}
+
+
+@pytest.mark.parametrize("backend", sorted(ONBOARD_BACKENDS))
+def test_an_onboard_backend_does_not_import_the_other(backend):
+    files = sorted((ROOT / "onboard" / backend).rglob("*.py"))
+    assert files, f"no sources found under onboard/{backend}/"
+    offenders = {str(f.relative_to(ROOT)): sorted(name for name in _imported_modules(f)
+                                                  if name.startswith(ONBOARD_BACKENDS[backend]))
+                 for f in files}
     assert {f: bad for f, bad in offenders.items() if bad} == {}
 
 

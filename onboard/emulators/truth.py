@@ -27,8 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from onboard.devices import PanTiltReading
-from onboard.hardware.fault import DeviceFault
+from onboard.devices import DeviceFault, PanTiltReading
 from shared.geometry import Pose2D
 from shared.world import World, resolve_world
 

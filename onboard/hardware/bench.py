@@ -14,8 +14,9 @@ import threading
 import time
 from collections.abc import Callable
 
+from onboard.config import PioneerConfig
 from onboard.hardware import arcos
-from onboard.hardware.pioneer import PioneerBase, PioneerConfig, WireTimes
+from onboard.hardware.pioneer import PioneerBase, WireTimes
 from shared.geometry import Pose2D
 from shared.limits import BaseLimits
 

@@ -18,17 +18,16 @@ import logging
 import math
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import serial
 
-from onboard.devices import BaseReading, MotionOutcome
+from onboard.config import PioneerConfig
+from onboard.devices import BaseReading, DeviceFault, MotionOutcome
 from onboard.hardware import arcos
 from onboard.hardware.arcos import ArcosError, Command, Packet, PacketReader, RobotIdentity
-from onboard.hardware.fault import DeviceFault
 from shared.geometry import Pose2D, wrap_angle
 from shared.limits import BaseLimits
-from shared.strict import bounds
 
 log = logging.getLogger(__name__)
 
@@ -41,23 +40,6 @@ _SIP_PERIOD_S = 0.1
 _BRAKING_MARGIN = 0.8  # plan to brake at 80 % of the deceleration the firmware was given
 
 
-@dataclass(frozen=True)
-class PioneerConfig:
-    """``[hardware.base]``: where the Pioneer is and how the driver talks to it."""
-
-    port: str = "sim"  # a device path, a pyserial URL ("socket://127.0.0.1:8101"), or "sim" for the simulator
-    baud: int = field(default=9600, metadata=bounds(1200, 921600))  # ARCOS talks 9600 after power-up
-    sync_reply_timeout_ms: int = field(default=1000, metadata=bounds(10, 10_000))  # ARIA waits 1 s per echo
-    sync_attempts: int = field(default=4, metadata=bounds(1, 100))
-    stale_session_wait_ms: int = field(default=500, metadata=bounds(0, 10_000))  # after CLOSE to an old session
-    link_timeout_ms: int = field(default=1000, metadata=bounds(200, 60_000))  # no SIP this long: link down
-    reconnect_period_ms: int = field(default=1000, metadata=bounds(50, 60_000))
-    pulse_period_ms: int = field(default=500, metadata=bounds(50, 1900))  # idle keep-alive (the robot halts at 2 s)
-    resend_period_ms: int = field(default=500, metadata=bounds(50, 1900))  # motion commands repeated, as ARIA does
-    command_gap_ms: float = field(default=4.0, metadata=bounds(0.0, 50.0))  # ARCOS takes one command every 3-5 ms
-    turn_tolerance_deg: float = field(default=1.0, metadata=bounds(0.1, 20.0))
-    drive_tolerance_m: float = field(default=0.02, metadata=bounds(0.001, 0.5))
-    motion_timeout_margin_s: float = field(default=5.0, metadata=bounds(0.5, 600.0))  # beyond the profile's time
 
 
 @dataclass(frozen=True)

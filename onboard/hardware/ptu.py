@@ -20,30 +20,20 @@ import logging
 import math
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import serial
 
+from onboard.config import PtuConfig
 from onboard.devices import PanTiltReading
 from onboard.hardware.ptu_protocol import (Event, LimitHit, Noise, PtuError, Reply, ReplyTokenizer,
                                            command, deg_to_positions, parse_decimal, parse_integer,
                                            positions_to_rad, rad_to_positions)
 from shared.limits import PanTiltLimits
-from shared.strict import bounds
 
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class PtuConfig:
-    """``[hardware.pantilt]``; the slew speeds come from ``[pantilt]`` so the time model matches."""
-
-    port: str = "sim"  # a device path or a pyserial URL (socket://HOST:PORT); "sim" = simulated
-    baud: int = field(default=9600, metadata=bounds(1200, 115_200))  # the unit's power-up rate
-    reply_timeout_s: float = field(default=0.5, metadata=bounds(0.01, 10.0))  # one command's answer
-    startup_timeout_s: float = field(default=30.0, metadata=bounds(0.1, 120.0))  # self-calibration
-    move_timeout_s: float = field(default=15.0, metadata=bounds(0.5, 120.0))  # beyond the slew the speeds give
-    poll_s: float = field(default=0.05, metadata=bounds(0.001, 1.0))  # position polling during a look
 
 
 class PtuLink:

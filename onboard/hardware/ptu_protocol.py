@@ -23,7 +23,7 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
-from onboard.hardware.fault import DeviceFault
+from onboard.devices import DeviceFault
 
 TYPICAL_RESOLUTION_ARCSEC = 185.1428  # arc-seconds per position (0.0514°), PTU-D46 standard
 MAX_LINE_BYTES = 256  # no reply is longer; a longer "line" is garbage

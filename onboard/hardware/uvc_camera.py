@@ -18,31 +18,19 @@ hardware backend builds this one.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import cv2
 import numpy as np
 
-from onboard.devices import StereoImages
-from onboard.hardware.fault import DeviceFault
+from onboard.config import UvcStereoConfig
+from onboard.devices import DeviceFault, StereoImages
 from onboard.hardware.stereo_rig import load_rig
 from shared.geometry import HeadMount
-from shared.strict import bounds
 
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class UvcStereoConfig:
-    """``[hardware.camera]``."""
-
-    device: str = "sim"  # /dev/video0, a camera index, a video file or image sequence; "sim" = simulated
-    calibration: str = "stereo.yaml"  # OpenCV YAML from calibrate-stereo
-    width_px: int = field(default=1280, metadata=bounds(32, 8192))  # the side-by-side frame: both images
-    height_px: int = field(default=480, metadata=bounds(16, 4096))
-    fps: float = field(default=30.0, metadata=bounds(1.0, 240.0))
-    stale_frames: int = field(default=2, metadata=bounds(0, 30))  # dropped before a capture: UVC queues frames
-    swap_halves: bool = False  # True if the camera puts the right image in the left half
 
 
 class UvcStereoCamera:

@@ -14,8 +14,7 @@ import threading
 import time
 from typing import Any
 
-from onboard.devices import Clock, Devices
-from onboard.hardware.fault import DeviceFault
+from onboard.devices import Clock, DeviceFault, Devices
 
 log = logging.getLogger(__name__)
 

@@ -18,10 +18,8 @@ from conftest import wait_until
 
 from onboard.agent import Agent
 from onboard.backends import build_robot
-from onboard.config import HardwareConfig, OnboardConfig
+from onboard.config import HardwareConfig, OnboardConfig, PioneerConfig, PtuConfig
 from onboard.emulators.robot import EmulatedRobot
-from onboard.hardware.pioneer import PioneerConfig
-from onboard.hardware.ptu import PtuConfig
 from onboard.sim.world import load_world
 from shared import messages as m
 from shared.keys import RobotKeys

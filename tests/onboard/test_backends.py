@@ -13,11 +13,9 @@ import numpy as np
 import pytest
 
 from onboard.backends import build_robot
-from onboard.config import HardwareConfig, OnboardConfig
+from onboard.config import HardwareConfig, OnboardConfig, PioneerConfig, PtuConfig
 from onboard.emulators.robot import EmulatedRobot
 from onboard.hardware import arcos
-from onboard.hardware.pioneer import PioneerConfig
-from onboard.hardware.ptu import PtuConfig
 from onboard.hardware.ptu_protocol import PtuError
 from onboard.sim.pantilt import SimPanTilt
 from onboard.sim.world import load_world

@@ -20,12 +20,9 @@ import pytest
 
 from offboard.perception.stereo import StereoMatcher
 from onboard.backends import build_robot
-from onboard.config import HardwareConfig, OnboardConfig, SimConfig
-from onboard.devices import Devices
+from onboard.config import HardwareConfig, OnboardConfig, PioneerConfig, PtuConfig, SimConfig
+from onboard.devices import DeviceFault, Devices
 from onboard.emulators.robot import EmulatedRobot
-from onboard.hardware.fault import DeviceFault
-from onboard.hardware.pioneer import PioneerConfig
-from onboard.hardware.ptu import PtuConfig
 from onboard.sim.world import load_world
 from shared.geometry import Pose2D
 from shared.world import World

@@ -12,13 +12,13 @@ import pytest
 import serial
 from conftest import wait_until
 
-from onboard.devices import BaseReading, MotionOutcome
+from onboard.config import PioneerConfig
+from onboard.devices import BaseReading, DeviceFault, MotionOutcome
 from onboard.emulators.pioneer import PioneerEmulator, PioneerEmulatorConfig, PioneerServerState
 from onboard.emulators.tcp import TcpPort
 from onboard.hardware import arcos
 from onboard.hardware.arcos import Command, build_packet
-from onboard.hardware.fault import DeviceFault
-from onboard.hardware.pioneer import PioneerBase, PioneerConfig, compose, inverse, probe
+from onboard.hardware.pioneer import PioneerBase, compose, inverse, probe
 from onboard.sim.base import SimBase
 from shared.geometry import Pose2D
 from shared.limits import BaseLimits

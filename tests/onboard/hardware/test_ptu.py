@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 from onboard.emulators.ptu import VERSION, PtuEmulator, PtuModel
-from onboard.hardware.ptu import PtuConfig, PtuLink, PtuPanTilt, probe
+from onboard.config import PtuConfig
+from onboard.hardware.ptu import PtuLink, PtuPanTilt, probe
 from onboard.hardware.ptu_protocol import PtuError, parse_integer
 from shared.limits import PanTiltLimits
 

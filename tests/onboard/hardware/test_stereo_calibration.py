@@ -15,7 +15,8 @@ import pytest
 from onboard.config import CameraConfig
 from onboard.hardware.stereo_calibration import CalibrationError, calibrate, calibrate_stereo, parse_board
 from onboard.hardware.stereo_rig import CalibrationFileError, load_rig
-from onboard.hardware.uvc_camera import UvcStereoCamera, UvcStereoConfig
+from onboard.config import UvcStereoConfig
+from onboard.hardware.uvc_camera import UvcStereoCamera
 from onboard.sim.chessboard_views import DEFAULT_VIEWS, render_chessboard_views
 
 BOARD, SQUARE_MM = (9, 6), 80.0

@@ -8,9 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
-from onboard.hardware.fault import DeviceFault
+from onboard.devices import DeviceFault
 from onboard.hardware.stereo_rig import CalibrationFileError, StereoRig, load_rig
-from onboard.hardware.uvc_camera import UvcStereoCamera, UvcStereoConfig, probe
+from onboard.config import UvcStereoConfig
+from onboard.hardware.uvc_camera import UvcStereoCamera, probe
 from shared.geometry import HeadMount
 
 W, H = 320, 240
