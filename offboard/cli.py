@@ -142,7 +142,7 @@ def _resume(args: argparse.Namespace) -> int:
                                              "only transport flags may be given with it")
     try:
         checkpoint = read(args.resume)
-        summary = run_search(checkpoint.transport.overridden_by(transport_from_args(args)), checkpoint.request,
+        summary = run_search(transport_from_args(args, checkpoint.transport), checkpoint.request,
                              resume=checkpoint)
     except CheckpointError as exc:  # read, or restored into the search before the robot moves
         raise SystemExit(f"syt-offboard search --resume: {exc}") from None

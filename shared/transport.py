@@ -10,12 +10,14 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal
 
 import zenoh
 
+from shared.arguments import number
+from shared.config import ConfigError
 from shared.keys import check_robot_id
 
 log = logging.getLogger(__name__)
@@ -23,6 +25,7 @@ log = logging.getLogger(__name__)
 # A frozen or unplugged peer is declared gone after this lease (Zenoh's default is 10 s): the robot
 # must notice a lost planner quickly, since its watchdog acts on the liveliness token.
 DEFAULT_LEASE_MS = 2000
+LEASE_MS_RANGE = (100, 3_600_000)
 _LEASE = "transport/link/tx/lease"
 # Sessions connect where they are told to (listen, connect) or by multicast scouting, not to every
 # peer gossip names: with Zenoh's default the agent kept dialling each short-lived observer's
@@ -47,13 +50,19 @@ class TransportConfig:
 
     def __post_init__(self) -> None:
         check_robot_id(self.robot_id)
+        if self.lease_ms is not None and not LEASE_MS_RANGE[0] <= self.lease_ms <= LEASE_MS_RANGE[1]:
+            # Zenoh takes any lease: 0 dropped every peer at once, and the agent "lost" its planner 4 ms in
+            raise ValueError(f"--lease-ms must lie in [{LEASE_MS_RANGE[0]}, {LEASE_MS_RANGE[1]}], got {self.lease_ms}")
 
     def zenoh(self) -> zenoh.Config:
         """The Zenoh configuration: the file first, then what the flags say on top."""
         if self.zenoh_config is not None:
             if not self.zenoh_config.is_file():
                 raise FileNotFoundError(f"--zenoh-config: no such file {self.zenoh_config}")
-            config = zenoh.Config.from_file(str(self.zenoh_config))
+            try:
+                config = zenoh.Config.from_file(str(self.zenoh_config))
+            except zenoh.ZError as exc:  # Zenoh's message points at a line, not at the file
+                raise ConfigError("--zenoh-config", str(self.zenoh_config), f"not a Zenoh configuration: {exc}") from None
         else:
             config = zenoh.Config()
         for key, value in {**self._flag_settings(config), **self.extra}.items():
@@ -72,14 +81,6 @@ class TransportConfig:
                     "connect/endpoints": list(self.connect) or None, "listen/endpoints": list(self.listen) or None}
         return {key: value for key, value in settings.items() if value is not None}
 
-    def overridden_by(self, given: TransportConfig) -> TransportConfig:
-        """This configuration with each setting that ``given`` moves off its default put in its place:
-        a resumed search keeps its saved robot and TLS file when only ``--connect`` is given anew."""
-        default = TransportConfig()
-        changed = {f.name: getattr(given, f.name) for f in fields(self)
-                   if getattr(given, f.name) != getattr(default, f.name)}
-        return replace(self, **changed)
-
     def open(self) -> zenoh.Session:
         log.info("opening Zenoh session: mode=%s connect=%s listen=%s scouting=%s",
                  self.mode, list(self.connect), list(self.listen), self.multicast_scouting)
@@ -88,7 +89,7 @@ class TransportConfig:
 
 def add_transport_args(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("transport (Zenoh)")
-    group.add_argument("--robot", default="syt", metavar="ID", help="robot id: keys live under syt/<ID>/ (default: syt)")
+    group.add_argument("--robot", metavar="ID", help="robot id: keys live under syt/<ID>/ (default: syt)")
     group.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                        help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable)")
     group.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
@@ -98,17 +99,14 @@ def add_transport_args(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--mode", choices=("peer", "client"), help="Zenoh mode (default: the file's, else peer)")
     group.add_argument("--no-multicast-scouting", action="store_true",
                        help="do not discover peers by multicast (use with --connect/--listen)")
-    group.add_argument("--lease-ms", type=int,
+    group.add_argument("--lease-ms", type=number("--lease-ms", *LEASE_MS_RANGE, kind=int),
                        help=f"link lease: a silent peer is dropped after this (default: the file's, else {DEFAULT_LEASE_MS})")
 
 
-def transport_from_args(args: argparse.Namespace) -> TransportConfig:
-    return TransportConfig(
-        robot_id=args.robot,
-        connect=tuple(args.connect),
-        listen=tuple(args.listen),
-        zenoh_config=args.zenoh_config,
-        mode=args.mode,
-        multicast_scouting=False if args.no_multicast_scouting else None,
-        lease_ms=args.lease_ms,
-    )
+def transport_from_args(args: argparse.Namespace, saved: TransportConfig = TransportConfig()) -> TransportConfig:
+    """``saved`` (by default the defaults) with each flag given in its place: a resumed search keeps
+    its saved robot and TLS file when only ``--connect`` is given anew."""
+    given = {"robot_id": args.robot, "connect": tuple(args.connect) or None, "listen": tuple(args.listen) or None,
+             "zenoh_config": args.zenoh_config, "mode": args.mode,
+             "multicast_scouting": False if args.no_multicast_scouting else None, "lease_ms": args.lease_ms}
+    return replace(saved, **{name: value for name, value in given.items() if value is not None})

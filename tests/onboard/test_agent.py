@@ -361,6 +361,7 @@ def test_a_bad_zenoh_config_is_named_before_any_device_opens(tmp_path, content):
     done = subprocess.run([sys.executable, "-m", "onboard.cli", "--backend", "sim", "--zenoh-config", str(path)],
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert str(path) in done.stderr  # a malformed file was refused with Zenoh's message only, no path
     assert "simulated robot" not in done.stderr  # refused before the robot was built
 
 

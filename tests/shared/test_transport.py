@@ -56,13 +56,38 @@ def test_gossip_connects_nobody_unless_the_file_configures_it(tmp_path):
 
 def test_flags_given_on_a_resume_replace_only_their_own_saved_settings(tmp_path):
     """Any flag used to throw the whole saved transport away: `--connect` alone lost the robot's id
-    and its TLS file, so the resumed search could not reach the robot."""
+    and its TLS file, so the resumed search could not reach the robot; and a flag given at its
+    default value (`--robot syt`) was taken for no flag."""
     saved = TransportConfig(robot_id="pioneer1", connect=("tls/robot:7447",), zenoh_config=tmp_path / "tls.json5",
                             multicast_scouting=False, lease_ms=1500)
     parser = argparse.ArgumentParser()
     add_transport_args(parser)
-    given = transport_from_args(parser.parse_args(["--connect", "tls/10.0.0.9:7447"]))
-    assert saved.overridden_by(given) == TransportConfig(
-        robot_id="pioneer1", connect=("tls/10.0.0.9:7447",), zenoh_config=tmp_path / "tls.json5",
+    given = parser.parse_args(["--connect", "tls/10.0.0.9:7447", "--robot", "syt"])
+    assert transport_from_args(given, saved) == TransportConfig(
+        robot_id="syt", connect=("tls/10.0.0.9:7447",), zenoh_config=tmp_path / "tls.json5",
         multicast_scouting=False, lease_ms=1500)
-    assert saved.overridden_by(transport_from_args(parser.parse_args([]))) == saved
+    assert transport_from_args(parser.parse_args([]), saved) == saved
+    assert transport_from_args(parser.parse_args([])) == TransportConfig()
+
+
+def test_a_lease_zenoh_would_take_but_no_link_survives_is_refused(capsys):
+    """A lease of -5 ms became 0: the agent came up and lost every planner at once."""
+    import pytest
+
+    parser = argparse.ArgumentParser()
+    add_transport_args(parser)
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--lease-ms", "-5"])
+    assert "--lease-ms must lie in [100, 3.6e+06], got -5" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="--lease-ms must lie in"):
+        TransportConfig(lease_ms=0)
+
+
+def test_a_malformed_zenoh_config_file_is_named(tmp_path):
+    import pytest
+
+    path = tmp_path / "broken.json5"
+    path.write_text("{ not json5")
+    with pytest.raises(ValueError, match="--zenoh-config: not a Zenoh configuration") as refused:
+        TransportConfig(zenoh_config=path).zenoh()
+    assert str(path) in str(refused.value)
