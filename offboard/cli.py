@@ -19,6 +19,7 @@ import argparse
 import dataclasses
 import json
 import logging
+import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -176,11 +177,20 @@ def _demo(args: argparse.Namespace) -> int:
     from offboard.experiments.world_facts import load_facts
     from offboard.search.run import SearchRequest, run_search
     from shared.launch import onboard_agent
+    from shared.world import WorldError
 
     out: Path = args.out
+    try:
+        world = load_facts(args.world)  # the demo is the experimenter: it knows what the target looks like
+        picture = world.picture_file(out)
+    except WorldError as exc:
+        log.error("--world %s: %s", args.world, exc)
+        return 2
+    except subprocess.CalledProcessError as exc:  # the simulator could not draw the picture the world names
+        said = exc.stderr.decode(errors="replace").strip().splitlines() or ["no reason given"]
+        log.error("--world %s: its target picture: %s", args.world, said[-1].split(" ERROR ", 1)[-1])
+        return 2
     out.mkdir(parents=True, exist_ok=True)
-    world = load_facts(args.world)  # the demo is the experimenter: it knows what the target looks like
-    picture = world.picture_file(out)
     started = time.monotonic()
     with onboard_agent(["--backend", "sim", "--world", args.world], out / "onboard.log") as agent:
         transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)

@@ -269,3 +269,20 @@ def test_every_prior_kind_is_accepted():
 
     specs = ("uniform", "hints:h.toml", "last-seen:1,2,0.7", "last-seen:1,2,0.7,30", "surfaces", "saliency")
     assert SearchRequest(pictures=(Path("t.png"),), target_size_m=(0.2, 0.2, 0.2), priors=specs).priors == specs
+
+
+@pytest.mark.parametrize("world, problem", [
+    ("no-such-world", "no such world file and no bundled world of that name"),
+    ("nan.toml", "must be finite"),
+    ("nopic.toml", "its target picture: syt.onboard: unknown picture 'nope'"),
+])
+def test_the_demo_names_a_broken_world_without_a_traceback(tmp_path, caplog, world, problem):
+    """Each was a traceback: only bad configuration values were caught, not a world's."""
+    from offboard.cli import main
+
+    paper_lab = (Path(__file__).resolve().parents[3] / "shared" / "worlds" / "paper-lab.toml").read_text()
+    (tmp_path / "nan.toml").write_text(paper_lab.replace("size = [9.0, 5.0, 2.5]", "size = [nan, 5.0, 2.5]"))
+    (tmp_path / "nopic.toml").write_text(paper_lab.replace('picture = "target.png"', 'picture = "nope"'))
+    path = world if world == "no-such-world" else str(tmp_path / world)
+    assert main(["demo", "--world", path, "--out", str(tmp_path / "out")]) == 2
+    assert problem in caplog.text
