@@ -21,3 +21,17 @@ def test_a_broken_parser_is_reported_not_raised(monkeypatch):
     report = run_target(target, 10)
     assert report.failures == report.cases >= 10
     assert "AssertionError" in report.examples[0]
+
+
+def test_a_parser_error_escaping_a_stream_is_a_failure_not_a_refusal(monkeypatch):
+    """The stream targets took the parser's own error for the expected refusal, so a parser that
+    raised on garbled bytes passed the fuzz."""
+    from onboard.hardware import arcos
+    from onboard.hardware.arcos import ArcosError
+
+    def raising(self, data):
+        raise ArcosError("a packet the reader should have skipped")
+    monkeypatch.setattr(arcos.PacketReader, "feed", raising)
+    (target,) = [t for t in onboard_targets() if t.name == "arcos stream"]
+    report = run_target(target, 10)
+    assert report.failures == report.cases >= 10 and "ArcosError" in report.examples[0]
