@@ -30,7 +30,7 @@ def test_file_and_overrides(tmp_path):
     ("[hardware.camera]\ndevise = '/dev/video0'\n", "hardware.camera.devise"),
     ("[sim.odometry_noise]\ndistance_frac = nan\n", "sim.odometry_noise.distance_frac"),
     ("[sim]\nseed = -1\n", "sim.seed"),  # numpy refuses it later, naming nothing
-    ("[pantilt\n", ""),  # TOML syntax
+    ("[pantilt\n", "not valid TOML"),
 ])
 def test_mistakes_name_the_file_and_key(tmp_path, text, key):
     path = tmp_path / "bad.toml"

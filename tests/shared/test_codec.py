@@ -71,9 +71,11 @@ def _payload(type_name: str, body: dict, schema: int = m.SCHEMA_VERSION) -> byte
 
 
 LOOK = {"command_id": "x", "pan_deg": 10.0, "tilt_deg": 0.0}
+GARBAGE = [
+    (b"\xc1\xff\x00garbage", "not a msgpack payload"),
+    (msgpack.packb([1, 2]), "expected a map with exactly schema, type and body"),
+]
 BAD = [
-    ("not msgpack", b"\xc1\xff\x00garbage", ""),
-    ("not a map", msgpack.packb([1, 2]), ""),
     ("old schema", _payload("LookCommand", LOOK, schema=0), "schema"),
     ("unknown type", _payload("FlyCommand", LOOK), "type"),
     ("unknown field", _payload("LookCommand", {**LOOK, "zoom": 2.0}), "zoom"),
@@ -90,6 +92,12 @@ BAD = [
     ("reset target", _payload("SimReset", {"command_id": "x", "start": {"x_m": 1.0, "y_m": 2.0, "heading_deg": 0.0},
                                            "target_m": [1.0, 2.0], "target_yaw_deg": 0.0, "seed": 0}), "target_m"),
 ]
+
+
+@pytest.mark.parametrize("payload,says", GARBAGE)
+def test_garbage_raises_one_protocol_error_saying_what_it_is(payload, says):
+    with pytest.raises(ProtocolError, match=says):
+        decode(payload, m.LookCommand)
 
 
 @pytest.mark.parametrize("name,payload,field", BAD, ids=[b[0] for b in BAD])

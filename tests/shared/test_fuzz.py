@@ -106,20 +106,21 @@ HOSTILE_TOML = {
     "deep nesting": b"deep = " + b"[" * 600 + b"]" * 600 + b"\n",  # tomllib raised RecursionError
     "invalid UTF-8": b"name = \"\xff\"\n",  # read_text raised UnicodeDecodeError
 }
+HOSTILE_SAYS = {"5000-digit integer": "4300 digits", "deep nesting": "recursion", "invalid UTF-8": "can't decode byte 0xff"}
 
 
 @pytest.mark.parametrize("how", [h for h in HOSTILE_TOML if HOSTILE_TOML[h]])
 def test_hostile_toml_is_a_config_error(how):
     from shared.limits import BaseLimits
 
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match=HOSTILE_SAYS[how]):
         on_file(lambda p: load_config(BaseLimits, p))(HOSTILE_TOML[how])
 
 
 @pytest.mark.parametrize("how", [h for h in HOSTILE_TOML if HOSTILE_TOML[h]])
 def test_hostile_toml_is_a_world_error(how):
     text = (WORLDS_DIR / "paper-lab.toml").read_bytes()
-    with pytest.raises(WorldError):
+    with pytest.raises(WorldError, match=HOSTILE_SAYS[how]):
         on_file(load_world)(HOSTILE_TOML[how] + text)
 
 
