@@ -95,15 +95,22 @@ def truth_to_dict(truth: Truth) -> dict:
 
 
 def truth_from_dict(d: dict) -> Truth:
-    try:
-        numbers = [float(d[k]) for k in ("x_m", "y_m", "heading_rad", "pan_rad", "tilt_rad")]
-        moving = bool(d["head_moving"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise TruthLinkError(f"truth link: a truth reply lacks or garbles {exc}") from None
-    if not all(math.isfinite(v) for v in numbers):
-        raise TruthLinkError(f"truth link: a truth reply holds a non-finite number: {d}")
-    x, y, heading, pan, tilt = numbers
-    return Truth(Pose2D(x, y, heading), pan, tilt, moving)
+    """The truth in a reply; each value of its JSON type (no "1.5" or true for a number, no "no" for
+    a flag, which ``float`` and ``bool`` would take)."""
+    missing = [k for k in (*_TRUTH_NUMBERS, "head_moving") if k not in d]
+    if missing:
+        raise TruthLinkError(f"truth link: a truth reply lacks {', '.join(missing)}")
+    for key in _TRUTH_NUMBERS:
+        value = d[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise TruthLinkError(f"truth link: a truth reply's {key} must be a finite number, got {value!r}")
+    if not isinstance(d["head_moving"], bool):
+        raise TruthLinkError(f"truth link: a truth reply's head_moving must be true or false, got {d['head_moving']!r}")
+    x, y, heading, pan, tilt = (float(d[k]) for k in _TRUTH_NUMBERS)
+    return Truth(Pose2D(x, y, heading), pan, tilt, d["head_moving"])
+
+
+_TRUTH_NUMBERS = ("x_m", "y_m", "heading_rad", "pan_rad", "tilt_rad")
 
 
 def placement_from_dict(d: dict) -> WorldPlacement:

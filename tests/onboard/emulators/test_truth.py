@@ -51,7 +51,7 @@ def test_a_garbled_answer_names_what_is_wrong(tmp_path):
     liar = threading.Thread(target=lie)
     liar.start()
     link = TruthLink(path)
-    for expected in ("not a JSON line", "lacks or garbles 'y_m'", "unknown ask"):
+    for expected in ("not a JSON line", "lacks y_m, heading_rad", "unknown ask"):
         with pytest.raises(TruthLinkError, match=expected):
             link.truth()
     liar.join()
@@ -61,5 +61,11 @@ def test_a_garbled_answer_names_what_is_wrong(tmp_path):
 def test_decoding_refuses_what_is_not_a_truth():
     with pytest.raises(TruthLinkError, match="expected a JSON object"):
         decode(b"[1, 2]\n")
-    with pytest.raises(TruthLinkError, match="non-finite"):
-        truth_from_dict({"x_m": "nan", "y_m": 0, "heading_rad": 0, "pan_rad": 0, "tilt_rad": 0, "head_moving": False})
+    good = {"x_m": 1.0, "y_m": 0, "heading_rad": 0, "pan_rad": 0, "tilt_rad": 0, "head_moving": False}
+    assert truth_from_dict(good).pose.x_m == 1.0
+    for key, value in (("x_m", "nan"), ("x_m", "1.5"), ("y_m", True), ("tilt_rad", float("inf")),
+                       ("head_moving", "no"), ("head_moving", 1)):  # "1.5", true and "no" were taken
+        with pytest.raises(TruthLinkError, match=f"truth reply's {key} must be"):
+            truth_from_dict({**good, key: value})
+    with pytest.raises(TruthLinkError, match="lacks pan_rad"):
+        truth_from_dict({k: v for k, v in good.items() if k != "pan_rad"})
