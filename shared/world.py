@@ -22,7 +22,8 @@ World files are TOML (a contract other tools write; ``shared/worlds`` bundles fo
     [target]
     picture = "target.png"        # optional (default "target"): built-in picture or image path
     size = [0.23, 0.23, 0.23]     # box extents along x, y, z before yaw, metres
-    position = [1.6, 3.6, 0.75]   # centre of the target's bottom face
+    position = [1.6, 3.6, 0.75]   # centre of the target's bottom face, on the floor or on the top
+                                  # of an obstacle under that centre (nothing floats)
     yaw_deg = -90                 # optional (default 0): direction its picture faces, 0 = +x, CCW
     sides = 1                     # optional (default 1): pictured sides, 1 (the face yaw points to)
                                   # or 4 (every vertical face: recognisable from any direction;
@@ -245,7 +246,7 @@ def load_world(path_or_name: str | Path, *, robot_radius_m: float = DEFAULT_ROBO
     """Load a bundled world by name (``"paper-lab"``, ``"test/room-2000-0"``) or a world file by path."""
     path = resolve_world(path_or_name)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # an editor's byte-order mark is no TOML statement
     except (OSError, UnicodeDecodeError) as exc:
         raise WorldError(f"{path}: cannot read world file ({exc})") from exc
     try:
@@ -457,6 +458,19 @@ def _validate_target(world: World, size: np.ndarray) -> None:
         if _target_overlaps(target, obstacle):
             raise WorldError(f"target.position: target box overlaps obstacle {obstacle.name!r} "
                              "(it may rest on a surface but not cut into it)")
+    _validate_support(world)
+
+
+def _validate_support(world: World) -> None:
+    """The target's bottom rests on the floor or on the top of an obstacle under its centre: the
+    simulator has no gravity, so a target in the air would render and be searched for as if held up."""
+    x, y, z = world.target.position_m
+    under = [b for b in world.obstacles if b.min_m[0] - _TOL_M <= x <= b.max_m[0] + _TOL_M
+             and b.min_m[1] - _TOL_M <= y <= b.max_m[1] + _TOL_M]
+    if min(abs(z - top) for top in [0.0, *(b.max_m[2] for b in under)]) > _TOL_M:
+        tops = "".join(f", {b.name!r} at {b.max_m[2]:g} m" for b in under)
+        raise WorldError(f"target.position: the target's bottom is {z:g} m high and rests on nothing: the tops "
+                         f"at its centre ({x:g}, {y:g}) are the floor at 0 m{tops} (tolerance {_TOL_M * 1000:g} mm)")
 
 
 def _listed(values: Iterable[float]) -> str:

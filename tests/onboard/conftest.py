@@ -22,7 +22,7 @@ size = [6.0, 4.0, 2.5]
 [target]
 picture = "target"
 size = [0.23, 0.23, 0.23]
-position = [3.0, 3.8, 0.5]
+position = [3.0, 3.8, 0.0]
 yaw_deg = -90
 [robot]
 start = [1.5, 1.5]

@@ -149,6 +149,35 @@ def test_mistakes_are_refused_naming_the_key(tmp_path, text, key):
     assert str(tmp_path) in str(err.value)  # and the file
 
 
+@pytest.mark.parametrize(
+    ("position", "found"),
+    [
+        ("[4.0, 2.0, 1.2]", "bottom is 1.2 m high and rests on nothing: the tops at its centre (4, 2) are the floor "
+                            "at 0 m ("),
+        ("[2.5, 2.5, 0.91]", "bottom is 0.91 m high and rests on nothing: the tops at its centre (2.5, 2.5) are the "
+                             "floor at 0 m, 'table' at 0.75 m (tolerance 1 mm)"),  # 16 cm above the table
+        ("[3.2, 2.5, 0.75]", "at its centre (3.2, 2.5) are the floor at 0 m ("),  # beside the table, at its height
+        ("[0.5, 0.15, 1.2]", "are the floor at 0 m, 'wall-shelf' at 1.65 m"),  # under the shelf, in the air
+    ],
+)
+def test_a_target_in_the_air_is_refused_naming_the_file_its_height_and_the_tops_under_it(tmp_path, position, found):
+    with pytest.raises(WorldError) as err:
+        load_world(write(tmp_path, edit("position = [2.5, 2.5, 0.75]", f"position = {position}")))
+    assert str(err.value).startswith("target.position: the target's ") and found in str(err.value)
+    assert str(tmp_path) in str(err.value)
+
+
+@pytest.mark.parametrize("position", ["[2.5, 2.5, 0.7509]", "[3.0, 2.5, 0.75]", "[0.5, 0.15, 1.65]", "[4.0, 2.0, 0.0]"])
+def test_a_target_on_the_floor_or_a_top_under_its_centre_is_accepted_within_a_millimetre(tmp_path, position):
+    load_world(write(tmp_path, edit("position = [2.5, 2.5, 0.75]", f"position = {position}")))
+
+
+def test_a_world_file_with_a_byte_order_mark_loads(tmp_path):
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + BASE.encode())
+    assert load_world(path).name == "tiny"
+
+
 def test_missing_world_file_and_unknown_bundled_name(tmp_path):
     with pytest.raises(WorldError, match="no bundled world of that name"):
         load_world("paper-lap")
@@ -189,6 +218,8 @@ def test_target_overrides_are_validated(tmp_path):
     assert world.with_target(2.5, 1.85, 0.0, 45.0).target.yaw_deg == 45.0  # clear of it
     with pytest.raises(WorldError, match="robot.start"):
         world.with_target(1.0, 1.2, 0.0, 0.0)  # a target on the floor blocks the robot too
+    with pytest.raises(WorldError, match="target.position: the target's bottom is 0.5 m high and rests on nothing"):
+        world.with_target(4.0, 3.0, 0.5, 0.0)
 
 
 def test_yawed_target_footprint_and_picture_corners():

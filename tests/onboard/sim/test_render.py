@@ -142,7 +142,8 @@ def test_the_target_picture_appears_where_geometry_puts_it(lab, lab_renderer):
 
 
 def test_a_yawed_target_is_where_its_pose_says(tmp_path):
-    world = room_world(tmp_path, target_at=(3.0, 2.3, 0.6, 150.0))  # floating, turned 30 deg off us
+    post = ((2.95, 2.25, 0.0), (3.05, 2.35, 0.6))  # under the target, out of sight below it
+    world = room_world(tmp_path, obstacles=[post], target_at=(3.0, 2.3, 0.6, 150.0))  # turned 30 deg off us
     tilt = -0.3
     frame = StereoRenderer(world, K, MOUNT).render(world.start, 0.0, tilt)
     corners = world.target.picture_corners_m()
@@ -211,7 +212,8 @@ def test_sift_finds_the_target_picture(lab, lab_renderer, distance_m):
 def test_a_target_with_four_sides_is_recognised_from_every_direction(tmp_path, sides):
     from offboard.perception.detection import TargetModel, make_detector
 
-    world = room_world(tmp_path, target_at=(3.0, 2.0, 0.8, 30.0))
+    post = ((2.95, 1.95, 0.0), (3.05, 2.05, 0.8))  # under the target, out of sight below it
+    world = room_world(tmp_path, obstacles=[post], target_at=(3.0, 2.0, 0.8, 30.0))
     world = replace(world, target=replace(world.target, sides=sides))
     renderer = StereoRenderer(world, K, MOUNT)
     picture = load_picture(world.target.picture, world.base_dir)
