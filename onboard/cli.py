@@ -132,7 +132,7 @@ def run_render(argv: list[str]) -> int:
 
     try:
         config = load_config(OnboardConfig, args.config)
-        world = _load_world(args, config)
+        world = _fitting_world(args, config)
         problem = config.pantilt.check(args.pan, args.tilt)
         if problem:
             raise ValueError(problem)
@@ -144,6 +144,19 @@ def run_render(argv: list[str]) -> int:
     for path in paths:
         sys.stdout.write(f"{path}\n")
     return 0
+
+
+def _fitting_world(args: argparse.Namespace, config: OnboardConfig):
+    """The world to render, refused (naming its file) if the robot's cameras do not fit under its ceiling."""
+    from onboard.sim.world import check_fits
+    from shared.world import WorldError, resolve_world
+
+    world = _load_world(args, config)
+    try:
+        check_fits(world, config.camera.mount())
+    except WorldError as exc:
+        raise WorldError(f"{exc} [in {resolve_world(args.world or config.sim.world)}]") from exc
+    return world
 
 
 def run_bench(argv: list[str]) -> int:
@@ -227,10 +240,17 @@ def run_worlds(argv: list[str]) -> int:
         return _write_views(args)
     if args.count < 1:
         parser.error(f"--count: must be at least 1, got {args.count}")
+    if args.seed < 0:  # numpy's generators take no negative seed
+        parser.error(f"--seed: must be 0 or more, got {args.seed}")
+    if args.out.exists() and not args.out.is_dir():
+        parser.error(f"--out must be a folder: {args.out} is a file")
     from onboard.sim.world_generator import write_worlds
 
     try:
         paths = write_worlds(args.count, args.seed, args.out)
+    except ValueError as exc:  # a folder holding other world files
+        log.error("%s", exc)
+        return 2
     except (OSError, RuntimeError) as exc:
         log.error("%s", exc)
         return 1

@@ -360,9 +360,13 @@ def draw_checked_world(seed: int, index: int, out_dir: Path) -> tuple[str, int]:
 
 
 def write_worlds(count: int, seed: int, out_dir: Path) -> list[Path]:
-    """Write ``count`` checked worlds ``out_dir/room-SEED-K.toml``; the same seed writes the same files."""
+    """Write ``count`` checked worlds ``out_dir/room-SEED-K.toml``; the same seed writes the same files.
+    Raises ``ValueError``, before writing anything, for a negative seed or a folder holding other world files."""
     if count < 1:
         raise ValueError(f"count must be at least 1, got {count}")
+    if seed < 0:
+        raise ValueError(f"seed must be 0 or more, got {seed}")
+    _check_only_this_batch(count, seed, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths, rejected, started = [], 0, time.perf_counter()
     for index in range(count):
@@ -373,3 +377,14 @@ def write_worlds(count: int, seed: int, out_dir: Path) -> list[Path]:
         rejected += failures
     log.info("%d worlds in %s (%d draws rejected) in %.1f s", count, out_dir, rejected, time.perf_counter() - started)
     return paths
+
+
+def _check_only_this_batch(count: int, seed: int, out_dir: Path) -> None:
+    """Refuse a folder holding world files this batch would not write: run as a folder of worlds
+    (``--worlds DIR``), it would run those stale ones too. The batch's own files may be rewritten."""
+    ours = {f"{world_file_name(seed, index)}.toml" for index in range(count)}
+    others = sorted(p.name for p in out_dir.glob("*.toml") if p.name not in ours) if out_dir.is_dir() else []
+    if others:
+        shown = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+        raise ValueError(f"{out_dir}: already holds world files this batch (seed {seed}, count {count}) would not "
+                         f"write: {shown}; write into an empty folder or remove them")

@@ -106,6 +106,15 @@ def test_worlds_check_names_every_world_it_cannot_run_and_passes_the_rest(tmp_pa
     assert "room.texture: unknown texture 'marble'" in errors[1] and str(bad) in errors[1]
 
 
+def test_render_refuses_a_room_lower_than_the_cameras_naming_the_file(tmp_path, caplog):
+    low = write(tmp_path, LOW, "low.toml")
+    assert onboard_cli.main(["render", "--world", str(low), "--out", str(tmp_path / "out")]) == 2
+    errors = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert errors == [f"room.size: the room is 1 m high, and the robot's cameras are 1.2 m above the floor: the robot "
+                      f"does not fit [in {low}]"]
+    assert not (tmp_path / "out").exists()
+
+
 def test_picture_and_texture_library():
     assert textures.load_picture("target.png", "/nonexistent").shape[2] == 3
     np.testing.assert_array_equal(textures.load_picture("target.png"), textures.load_picture("target"))

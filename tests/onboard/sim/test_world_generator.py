@@ -180,6 +180,38 @@ def test_the_command_writes_the_files(tmp_path, written, capsys):
     assert refused.value.code == 2 and "--count: must be at least 1" in capsys.readouterr().err
 
 
+def test_a_negative_seed_is_refused_by_name_before_anything_is_made(tmp_path, capsys):
+    with pytest.raises(SystemExit) as refused:
+        main(["worlds", "generate", "--count", "1", "--seed", "-1", "--out", str(tmp_path / "new")])
+    assert refused.value.code == 2 and "--seed: must be 0 or more, got -1" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="seed must be 0 or more, got -1"):
+        write_worlds(1, -1, tmp_path / "new")
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_folder_holding_another_batch_is_refused_and_the_batch_itself_rewritten(tmp_path, written, caplog):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / f"room-{SEED}-0.toml").write_text("stale, of this batch: rewritten")
+    (out / f"room-{SEED + 1}-0.toml").write_text("of another batch: left alone")
+    command = ["worlds", "generate", "--count", "1", "--seed", str(SEED), "--out", str(out)]
+    assert main(command) == 2
+    error = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"][-1]
+    assert error.startswith(f"{out}: already holds world files this batch (seed {SEED}, count 1) would not write: "
+                            f"room-{SEED + 1}-0.toml;")
+    assert (out / f"room-{SEED}-0.toml").read_text() == "stale, of this batch: rewritten"  # nothing written
+    (out / f"room-{SEED + 1}-0.toml").unlink()
+    assert main(command) == 0
+    assert (out / f"room-{SEED}-0.toml").read_bytes() == written[0].read_bytes()
+
+
+def test_an_out_that_is_a_file_is_refused(tmp_path, capsys):
+    (tmp_path / "file").write_text("")
+    with pytest.raises(SystemExit) as refused:
+        main(["worlds", "generate", "--count", "1", "--seed", "1", "--out", str(tmp_path / "file")])
+    assert refused.value.code == 2 and "--out must be a folder" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("suite, seed", [("dev", 1000), ("test", 2000)])
 def test_the_shipped_suites_are_what_the_command_makes(suite, seed, tmp_path):
     text, _ = draw_checked_world(seed, 0, tmp_path)
