@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 import sys
 from dataclasses import dataclass, field, replace
@@ -25,6 +26,7 @@ from offboard.navigation import grid_planner
 from offboard.perception.detectability import DetectabilityTable, face_size_m, facing_angle_deg
 from offboard.perception.detection.detector import shipped_table
 from offboard.perception.occupancy import FloorMap
+from shared import toml_writer
 from shared.geometry import HeadMount
 from shared.limits import PanTiltLimits
 from shared.strict import bounds
@@ -36,6 +38,7 @@ Placement = tuple[float, float, float, float]  # x, y, z of the bottom centre, y
 TABLE_KINDS = ("table", "desk")  # the surfaces of the "tables" prior and of the target placements
 DRIVE_CLEARANCE_M = 0.31  # what the navigator keeps from obstacles: the robot's radius 0.26 + its margin 0.05
 ARRIVAL_MARGIN_M = 0.25  # how far from where it was sent a robot may stop (the oracle's "arrived")
+_COMMENT_REFUSES = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")  # TOML comments may hold a tab, no other control
 
 
 # --- the truth -------------------------------------------------------------------------------------
@@ -407,14 +410,15 @@ def tables_hints(world: WorldFacts, layer_m: float = 0.3, mass: float = 0.9) -> 
     if not tables:
         raise ValueError(f"{world.name}: no table, desk or surface under its target for the tables prior")
     kinds = " or ".join(sorted({t.kind for t in tables}))
-    lines = [f"# the target is on a {kinds} of {world.name}: {mass:g} of the mass just above their tops, "
-             f"the same on each"]
-    for table in tables:
-        top = min(table.max_m[2] + layer_m, world.room_m[2])
-        lines += ["[[hint]]", f'name = "{table.name}"',
-                  f"min = [{table.min_m[0]:g}, {table.min_m[1]:g}, {table.max_m[2]:g}]",
-                  f"max = [{table.max_m[0]:g}, {table.max_m[1]:g}, {top:g}]",
-                  f"weight = {mass / len(tables):.6f}", ""]
-    return "\n".join(lines)
+    hints = [{"name": t.name, "min": [float(t.min_m[0]), float(t.min_m[1]), float(t.max_m[2])],
+              "max": [float(t.max_m[0]), float(t.max_m[1]), round(min(t.max_m[2] + layer_m, world.room_m[2]), 6)],
+              "weight": round(mass / len(tables), 6)} for t in tables]
+    about = (f"the target is on a {kinds} of {world.name}: {mass:g} of the mass just above their tops, "
+             "the same on each")
+    return _comment(about) + toml_writer.dumps({"hint": hints})  # dumps escapes the names
 
 
+def _comment(text: str) -> str:
+    """A TOML comment line of ``text``: the control characters a comment may not hold (a newline
+    would start a line of the file's own) spelled out as escapes."""
+    return "# " + _COMMENT_REFUSES.sub(lambda m: repr(m.group())[1:-1], text) + "\n"

@@ -16,6 +16,8 @@ from offboard.experiments.world_facts import (ARRIVAL_MARGIN_M, Obstacle, Seeing
                                               true_floor_map, viewpoint)
 from offboard.perception.detectability import DetectabilityTable
 from offboard.perception.detection.detector import shipped_table
+from offboard.planning.priors import HintsFile
+from shared.config import load_config
 
 # a 6 × 5 m room; a 2.1 m shelf against the north wall with the target on top, its picture facing the room
 SHELF = Obstacle((2.5, 4.69, 0.0), (3.5, 5.0, 1.9))  # the picture 5 mm in front of its edge
@@ -138,6 +140,20 @@ def test_a_generated_world_without_tables_runs_on_its_own_target(tmp_path):
     # the knowledge prior: the kind of surface its target stands on (a shelf), not tables it does not have
     assert [b.name for b in world.knowledge_surfaces()] == ["shelf"]
     assert 'name = "shelf"' in tables_hints(world)
+
+
+def test_the_tables_hints_file_reads_back_whatever_the_names_hold(tmp_path):
+    # a quote or a backslash in a name once made the file unreadable; a newline in the world's name added lines to it
+    world_file = tmp_path / "odd.toml"
+    world_file.write_text(GENERATED.replace('name = "storeroom"', r'name = "store\n[[hint]]\nweight = 1.0\u0001"')
+                          .replace('name = "counter"\nkind = "counter"', 'name = "desk \\"A\\" \\\\ 1"\nkind = "desk"'))
+    world = load_facts(str(world_file))
+    assert world.name == "store\n[[hint]]\nweight = 1.0\x01"
+    hints_file = tmp_path / "tables.toml"
+    hints_file.write_text(tables_hints(world))
+    hints = load_config(HintsFile, hints_file).hint
+    assert [(h.name, h.weight) for h in hints] == [("shelf", 0.45), ('desk "A" \\ 1', 0.45)]
+    assert hints_file.read_text().startswith(r"# the target is on a desk or shelf of store\n[[hint]]\nweight = 1.0\x01: ")
 
 
 def test_the_harness_accepts_the_priors_that_need_no_knowledge():
