@@ -8,8 +8,11 @@ With a fixed ``planned_processing_s`` a run repeats exactly (unless it runs to t
 counts the processing measured), so a run that changed, changed because of what differs between the
 sweeps (the code or the configuration). SPL is paired as the report
 pairs SYT with a baseline: a failure counts 0, and its mean and standard error count each scenario once
-(:func:`~offboard.experiments.report.paired_stderr`). Looks and distance are over the runs both
-sweeps found. The runs are also grouped by SPL's shortest path
+(:func:`~offboard.experiments.report.paired_stderr`). A run that crashed or timed out (an error row)
+counts 0 there too, so an infrastructure failure looks like a loss; the difference over the pairs where
+neither side errored is given beside it, with how many pairs it leaves out. Looks and distance are over
+the runs both sweeps found. Each variant names the worlds and seeds of its paired runs. The runs are
+also grouped by SPL's shortest path
 (:func:`~offboard.experiments.report.distance_group`), where a change near the target and one far
 from it can cancel out.
 
@@ -27,7 +30,7 @@ import numpy as np
 
 from offboard.experiments.calibration import cell
 from offboard.experiments.report import (by_distance, load_results, mean_of, paired_stderr, placement, scenario_mean,
-                                         variant_name)
+                                         scope, variant_name)
 
 RESULTS_FILE = "results.csv"
 OUTCOME = ("success", "actions", "distance_m", "spl")  # a run whose outcome differs in any of these changed
@@ -55,6 +58,10 @@ class PairedGroup:
     base: Side
     new: Side
     spl_stderr: float | None  # of the paired SPL difference; None below two scenarios
+    error_pairs: int = 0  # pairs in which either run crashed or timed out (an error row)
+    spl_difference_no_errors: float | None = None  # the paired SPL difference without those pairs; None: no pair left
+    spl_stderr_no_errors: float | None = None  # its standard error, each scenario once; None below two scenarios
+    scope: str = ""  # the worlds and seeds of the paired runs (base's names)
 
     @property
     def spl_difference(self) -> float:
@@ -71,8 +78,9 @@ class PairedLatency:
     new_median_ms: float
     base_p95_ms: float  # the 95th percentile of the runs' 95th percentiles, the report's figure
     new_p95_ms: float
-    difference_ms: float  # mean of new − base per run
+    difference_ms: float  # mean of new − base, each scenario once (its seeds averaged), as its standard error
     stderr_ms: float | None  # counting each scenario once, as for SPL
+    scope: str = ""  # the worlds and seeds of the paired runs (base's names)
 
 
 @dataclass(frozen=True)
@@ -137,12 +145,20 @@ def _paired(variant: str, group: str, pairs: list[tuple[dict, dict]]) -> PairedG
         mine = [pick(p) for p in pairs]
         return Side(sum(r["success"] for r in mine), scenario_mean({placement(r): r["spl"] or 0.0 for r in mine}),
                     *(mean_of([pick(p)[column] for p in found_both]) for column in ("actions", "distance_m")),
-                    sum(r["status"].startswith("error") for r in mine))
+                    sum(_errored(r) for r in mine))
 
     diffs = {placement(a): (b["spl"] or 0.0) - (a["spl"] or 0.0) for a, b in pairs}
+    clean = {placement(a): (b["spl"] or 0.0) - (a["spl"] or 0.0) for a, b in pairs
+             if not (_errored(a) or _errored(b))}
     changed = sum(any(a[c] != b[c] for c in OUTCOME) for a, b in pairs)
     return PairedGroup(variant, group, len(pairs), changed, side(lambda p: p[0]), side(lambda p: p[1]),
-                       paired_stderr(diffs))
+                       paired_stderr(diffs), len(pairs) - len(clean), scenario_mean(clean) if clean else None,
+                       paired_stderr(clean) if clean else None, scope([a for a, _ in pairs]))
+
+
+def _errored(row: dict) -> bool:
+    """Whether the run crashed or timed out: a failure, but not the search's doing."""
+    return row["status"].startswith("error")
 
 
 def _paired_latency(variant: str, pairs: list[tuple[dict, dict]]) -> PairedLatency | None:
@@ -151,9 +167,11 @@ def _paired_latency(variant: str, pairs: list[tuple[dict, dict]]) -> PairedLaten
     if not timed:
         return None
     base, new = np.array([t[0] for t in timed]), np.array([t[1] for t in timed])
+    diffs = {key: b - a for a, b, key in timed}
     return PairedLatency(variant, len(timed), float(np.median(base)), float(np.median(new)),
-                         float(np.percentile(base, 95)), float(np.percentile(new, 95)), float(np.mean(new - base)),
-                         paired_stderr({key: b - a for a, b, key in timed}))
+                         float(np.percentile(base, 95)), float(np.percentile(new, 95)), scenario_mean(diffs),
+                         paired_stderr(diffs), scope([a for a, b in pairs if a["planning_ms_p95"] is not None
+                                                      and b["planning_ms_p95"] is not None]))
 
 
 # --- output ----------------------------------------------------------------------------------------
@@ -165,29 +183,49 @@ def comparison_json(c: Comparison) -> dict:
             "latency": [asdict(t) for t in c.latency]}
 
 
+def _without_errors(g: PairedGroup) -> str:
+    """The difference over the pairs where neither run errored, beside the one over all, when they differ."""
+    if not g.error_pairs:
+        return ""
+    if g.spl_difference_no_errors is None:
+        return f"; without errors: — (all {_pairs(g.error_pairs)} left out)"
+    stderr = "" if g.spl_stderr_no_errors is None else f" ({g.spl_stderr_no_errors:.3f})"
+    return f"; without errors: {g.spl_difference_no_errors:+.3f}{stderr}, {_pairs(g.error_pairs)} left out"
+
+
+def _pairs(n: int) -> str:
+    return f"{n} pair" + ("" if n == 1 else "s")
+
+
 def comparison_md(c: Comparison) -> str:
     """The comparison as Markdown: one table of outcomes, one of planning time."""
+    errored = any(g.error_pairs for g in c.groups)
     lines = [f"Paired run for run: base `{c.base}`, new `{c.new}`. SPL over all paired runs (a failure counts 0), "
              "its difference's standard error counting each scenario once; looks and distance over the runs "
-             "both found.", "",
-             "| Variant | Runs | Changed | Found, base / new | SPL, base → new | Difference (SE) | Looks | "
+             "both found." + (" A crashed or timed-out run counts 0 too; beside the difference, the difference (SE) "
+                              "over the pairs where neither run errored, and how many pairs that leaves out."
+                              if errored else ""), "",
+             "| Variant | Runs | Changed | Successes, base / new | SPL, base → new | Difference (SE) | Looks | "
              "Distance (m) |", "|---" * 8 + "|"]
     for g in c.groups:
         name = g.variant if g.group == "all" else f"… {g.group}"
         stderr = "" if g.spl_stderr is None else f" ({g.spl_stderr:.3f})"
         lines.append(f"| {name} | {g.runs} | {g.changed} | {g.base.found} / {g.new.found} | "
-                     f"{g.base.spl:.3f} → {g.new.spl:.3f} | {g.spl_difference:+.3f}{stderr} | "
+                     f"{g.base.spl:.3f} → {g.new.spl:.3f} | {g.spl_difference:+.3f}{stderr}{_without_errors(g)} | "
                      f"{cell(g.base.looks, 1)} → {cell(g.new.looks, 1)} | "
                      f"{cell(g.base.distance_m)} → {cell(g.new.distance_m)} |")
+    lines += [""] + [f"{g.variant}: paired runs from {g.scope}." for g in c.groups if g.group == "all"]
     if c.latency:
         lines += ["", "Planning time per decision, each run's 95th percentile (fair only between sweeps run on the "
-                      "same machine the same day):", "",
+                      "same machine the same day); the paired difference is the mean of new − base, each scenario "
+                      "once (its seeds averaged), as its standard error counts them:", "",
                   "| Variant | Runs | Median run, base → new (ms) | 95th percentile of runs, base → new (ms) | "
                   "Paired difference (SE) |", "|---" * 5 + "|"]
         for t in c.latency:
             stderr = "" if t.stderr_ms is None else f" ({t.stderr_ms:.1f})"
             lines.append(f"| {t.variant} | {t.runs} | {t.base_median_ms:.0f} → {t.new_median_ms:.0f} | "
                          f"{t.base_p95_ms:.0f} → {t.new_p95_ms:.0f} | {t.difference_ms:+.1f}{stderr} |")
+        lines += [""] + [f"{t.variant}: timed runs from {t.scope}." for t in c.latency]
     crashed = "; ".join(f"{g.variant}: {g.base.errors} in base, {g.new.errors} in new" for g in c.groups
                         if g.group == "all" and (g.base.errors or g.new.errors))
     if crashed:

@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from offboard.experiments.baselines import BASELINES, BaselineContext
+from offboard.experiments.calibration import LOOKS_FILE
 from offboard.experiments.report import append_row, finished_keys, write_report
 from offboard.experiments.world_facts import (Placement, Start, WorldFacts, load_facts, robot_starts, tables_hints,
                                        target_placements, viewpoint)
@@ -402,11 +403,18 @@ def _check_worlds(paths: list[str]) -> None:
                            + ("; ".join(problems) or done.stderr.strip() or f"exit {done.returncode}"))
 
 
+# what a run writes into its folder (:func:`offboard.search.run.run_search`), removed before each attempt so
+# that a run that fails this time leaves none of an earlier attempt's (its looks.jsonl would feed the
+# calibration and coverage of an error row)
+RUN_OUTPUTS = ("summary.json", LOOKS_FILE, "search.png", "search.log", "search.rrd")
+
+
 def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Workers) -> dict | None:
     world, picture, hint_file = prepared[run.world]
     run_dir = settings.out / "runs" / run.slug
     run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "summary.json").unlink(missing_ok=True)  # a leftover of an interrupted attempt
+    for name in RUN_OUTPUTS:  # leftovers of an earlier attempt: a failed run must not be read with its looks
+        (run_dir / name).unlink(missing_ok=True)
     prior = f"hints:{hint_file}" if run.prior == "tables" else run.prior  # the others are search --prior kinds
     spec = WorkerSpec(asdict(run), str(world.path), str(picture), prior, settings.budget_s, str(run_dir),
                       settings.move_threshold, None if settings.config_path is None else str(settings.config_path))

@@ -124,6 +124,52 @@ def test_a_run_that_crashed_is_named_apart_from_a_search_that_failed(tmp_path, c
     assert main(["compare", str(base), str(base)]) == 0
     assert "Crashed or timed out" not in capsys.readouterr().out
 
+def test_a_crash_is_left_out_of_a_second_difference_printed_beside_the_one_that_counts_it_0(tmp_path, capsys):
+    base, new = _write(tmp_path / "base", BASE), _write(tmp_path / "new", _changed())
+    with (new / "results.csv").open() as f:
+        lines = f.read().splitlines()
+    crashed = next(i for i, line in enumerate(lines) if ",budget," in line)  # scenario 1, seed 1: a timeout instead
+    lines[crashed] = lines[crashed].replace(",budget,", ",error: timeout,")
+    (new / "results.csv").write_text("\n".join(lines) + "\n")
+    scenario_means = [(-0.4 - 0.3) / 2, 0.0, 0.0]  # scenario 1 keeps only its seed 0, unchanged
+    assert main(["compare", str(base), str(new)]) == 0
+    stderr = statistics.stdev(scenario_means) / 3 ** 0.5
+    assert (f"| -0.217 (0.109); without errors: {statistics.fmean(scenario_means):+.3f} ({stderr:.3f}), "
+            "1 pair left out |") in capsys.readouterr().out
+    every = compare(load_sweep(base), load_sweep(new)).groups[0]
+    assert every.spl_difference == pytest.approx((-0.4 - 0.3 - 0.6) / 6)  # the crash still counts 0 here
+    assert every.error_pairs == 1
+    assert every.spl_difference_no_errors == pytest.approx(statistics.fmean(scenario_means))
+    assert every.spl_stderr_no_errors == pytest.approx(statistics.stdev(scenario_means) / 3 ** 0.5)
+    assert main(["compare", str(base), str(new), "--json"]) == 0
+    first = json.loads(capsys.readouterr().out)["groups"][0]
+    assert first["spl_difference"] == pytest.approx(-1.3 / 6) and first["error_pairs"] == 1  # old keys kept
+    assert first["spl_difference_no_errors"] == pytest.approx(statistics.fmean(scenario_means))
+    assert compare(load_sweep(base), load_sweep(base)).groups[0].error_pairs == 0
+
+
+def test_the_printed_table_calls_successes_so_and_names_the_worlds_and_seeds_paired(tmp_path, capsys):
+    base, new = _write(tmp_path / "base", BASE), _write(tmp_path / "new", _changed())
+    assert main(["compare", str(base), str(new)]) == 0
+    markdown = capsys.readouterr().out
+    assert "| Successes, base / new |" in markdown and "Found" not in markdown
+    assert "SYT cost 3, uniform: paired runs from office, paper-lab; seeds 0,1; 3 start × target scenarios." in markdown
+    assert "SYT cost 3, uniform: timed runs from office, paper-lab; seeds 0,1; 3 start × target scenarios." in markdown
+    assert main(["compare", str(base), str(new), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["groups"][0]["base"]["found"] == 6 and printed["groups"][0]["scope"].startswith("office, paper-lab")
+
+
+def test_the_planning_time_difference_counts_each_scenario_once_as_its_standard_error(tmp_path):
+    base = {**BASE, (2, 2): (True, 0.8, 30, 5.0, 100.0), (2, 3): (True, 0.8, 30, 5.0, 100.0)}
+    new = {**BASE, (2, 2): (True, 0.8, 30, 5.0, 160.0), (2, 3): (True, 0.8, 30, 5.0, 160.0)}
+    (timing,) = compare(load_sweep(_write(tmp_path / "base", base)), load_sweep(_write(tmp_path / "new", new))).latency
+    per_scenario = [0.0, 0.0, (0 + 0 + 60 + 60) / 4]  # scenario 2 ran four seeds, the others two
+    assert timing.runs == 8
+    assert timing.difference_ms == pytest.approx(statistics.fmean(per_scenario))  # 10 ms, not 120 / 8 = 15 ms
+    assert timing.stderr_ms == pytest.approx(statistics.stdev(per_scenario) / 3 ** 0.5)
+
+
 def test_the_command_names_a_folder_without_results_and_sweeps_with_nothing_in_common(tmp_path, caplog):
     base = _write(tmp_path / "base", BASE)
     caplog.set_level(logging.ERROR)

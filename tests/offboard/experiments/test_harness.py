@@ -117,6 +117,31 @@ def test_an_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path, mo
 
 
 
+def test_a_retried_run_leaves_none_of_an_earlier_attempt_s_outputs_for_its_error_row(tmp_path):
+    run = build_runs(PAPER)[0]
+    world = load_facts(run.world)
+    run_dir = tmp_path / "runs" / run.slug
+    run_dir.mkdir(parents=True)
+    for name in ("summary.json", LOOKS_FILE, "search.png", "search.log"):  # an earlier attempt's, that failed
+        (run_dir / name).write_text("{}\n")
+    seen = []
+
+    class Crashing:
+        stopping = False
+
+        def run(self, spec_path, timeout_s):
+            seen.append(sorted(p.name for p in spec_path.parent.iterdir()))
+            return "error: RuntimeError: the agent died"
+
+    prepared = {run.world: (world, tmp_path / "picture.png", tmp_path / "hints.toml")}
+    row = experiment._execute(run, prepared, experiment.SweepSettings(tmp_path, jobs=1), Crashing())
+    assert row["status"].startswith("error") and row["run_dir"] == f"runs/{run.slug}"
+    assert seen == [["spec.json"]] and not (run_dir / LOOKS_FILE).exists()  # nothing stale to feed the calibration
+    append_row(tmp_path / "results.csv", row)
+    write_report(tmp_path / "results.csv", tmp_path)  # the error row's looks: none
+    assert "No run logged its looks" in (tmp_path / "report.md").read_text()
+
+
 def test_a_sweep_does_not_resume_into_a_folder_swept_with_other_settings(tmp_path, monkeypatch, caplog):
     world = load_facts("paper-lab")
     runs = build_runs(PAPER)[:2]

@@ -108,6 +108,77 @@ def test_the_spl_margin_pairs_scenarios_and_the_best_baseline_is_never_the_oracl
             f"SYT − it = **{sum(diffs) / 3:+.3f}**") in text
 
 
+def test_the_oracle_is_called_a_strong_reference_not_a_ceiling_as_a_search_can_beat_its_spl(tmp_path):
+    results = tmp_path / "results.csv"
+    for seed, (mine, oracle) in enumerate(((0.0, 10.0), (10.0, 10.0))):  # seed 0: SYT drives less, its SPL higher
+        _row(results, "syt", "office", "uniform", seed, 100.0, 30.0, distance_m=mine)
+        _row(results, "oracle", "office", "uniform", seed, 100.0, 30.0, distance_m=oracle)
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert "ceiling" not in text and "bound what a search can reach" not in text
+    assert "Oracle is given the truth: a strong reference, not a rival, and not a bound" in text
+    assert ("stricter viewpoint (a detection rate of 0.9, with margins) than SPL's shortest path is measured to "
+            "(0.8)") in text
+    assert "SYT with prior `uniform` scores above oracle in 1 of 2 paired runs" in text
+    [margin] = spl_margins(load_results(results))
+    assert margin.syt_ahead == 1 and margin.difference > 0
+
+
+def test_paired_tables_count_runs_and_scenarios_apart_and_name_their_worlds_and_seeds(tmp_path):
+    results = tmp_path / "results.csv"
+    for seed in (0, 1, 2):  # three seeds of one office scenario, one seed of a paper-lab one
+        _row(results, "syt", "office", "uniform", seed, 100.0, 30.0)
+        _row(results, "syt", "office", "tables", seed, 100.0, 30.0)
+        _row(results, "exhaustive", "office", "uniform", seed, 100.0, 30.0, found=seed > 0)
+    _row(results, "syt", "paper-lab", "uniform", 0, 100.0, 30.0)
+    _row(results, "exhaustive", "paper-lab", "uniform", 0, 100.0, 30.0)
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    margin_row = next(line for line in text.splitlines() if line.startswith("| uniform | exhaustive (uniform) |"))
+    assert margin_row.startswith("| uniform | exhaustive (uniform) | 4 (2) | ")
+    assert margin_row.endswith("| office, paper-lab; seeds 0,1,2; 2 start × target scenarios |")
+    assert "| Runs (scenarios) | SYT SPL |" in text and "| Scenarios |" not in text
+    assert "| 3 | tables | 3 (1) | " in text  # the prior against uniform
+    # time to find: the runs (same prior) SYT and exhaustive both found, of two scenarios
+    timed = next(line for line in text.split("Mean time to find")[1].splitlines() if line.startswith("| exhaustive | "))
+    assert timed.startswith("| exhaustive | 3 (2) | ") and timed.endswith(
+        "| office, paper-lab; seeds 0,1,2; 2 start × target scenarios |")
+    rows = load_results(results)
+    margin = {m.prior: m for m in spl_margins(rows)}
+    assert (margin["uniform"].scenarios, margin["uniform"].distinct_scenarios) == (4, 2)  # the stderr's n is 2
+    assert (margin["tables"].scenarios, margin["tables"].distinct_scenarios) == (3, 1)
+    [gain] = prior_gains(rows)
+    assert (gain.scenarios, gain.distinct_scenarios) == (3, 1)
+    assert gain.scope == "office; seeds 0,1,2; 1 start × target scenarios"
+
+
+def test_successful_runs_no_position_sees_are_said_to_score_spl_0_where_spl_is_first_given(tmp_path):
+    results = tmp_path / "results.csv"
+    for seed in (0, 1, 2):
+        row = _row(tmp_path / "scratch.csv", "syt", "office", "uniform", seed, 100.0, 30.0)
+        unseen = seed == 2  # found, but by SPL's rule no position sees the target: SPL 0
+        append_row(results, {**row, "shortest_path_m": "" if unseen else row["shortest_path_m"],
+                             "spl": 0.0 if unseen else row["spl"]})
+    rows = load_results(results)
+    finite = statistics.fmean([r["spl"] for r in rows if r["seed"] != 2])
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    first = text.split("## Success, SPL, planning latency")[1].split("### ")[0]
+    assert ("**1 successful runs score SPL 0: no position sees the target by SPL's rule** "
+            "(worlds: office; seeds 2; 1 start × target scenarios).") in first
+    assert "| SPL | SPL, finite shortest path (runs) |" in first
+    every = statistics.fmean([r["spl"] for r in rows])
+    assert f"| syt (all costs) | 3 | 100.0% | {every:.3f} | {finite:.3f} (2) |" in first
+
+
+def test_a_report_whose_every_target_is_seen_has_no_finite_spl_column(tmp_path):
+    results = tmp_path / "results.csv"
+    _row(results, "syt", "office", "uniform", 0, 100.0, 30.0)
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert "score SPL 0" not in text and "finite shortest path" not in text
+
+
 def test_the_standard_error_counts_each_scenario_once_its_seeds_averaged(tmp_path):
     results = tmp_path / "results.csv"
     driven = {"office": (8.0, 9.0, 10.0), "paper-lab": (12.0, 16.0, 20.0)}
@@ -207,7 +278,7 @@ def test_each_prior_is_paired_with_uniform_on_the_same_scenarios(tmp_path):
     write_report(results, tmp_path)
     text = (tmp_path / "report.md").read_text()
     assert gain.stderr is None  # two seeds of one scenario: one sample, so no standard error to show
-    assert f"| 3 | surfaces | 2 | {gain.spl:.3f} | {gain.reference_spl:.3f} | {gain.difference:+.3f} | 1 |" in text
+    assert f"| 3 | surfaces | 2 (1) | {gain.spl:.3f} | {gain.reference_spl:.3f} | {gain.difference:+.3f} | 1 |" in text
 
 
 def test_the_calibration_bins_looks_and_checks_each_bin_with_enough_looks(tmp_path):
