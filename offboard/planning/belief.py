@@ -156,6 +156,8 @@ class TargetBelief:
         probability P_Ψ(f) (eq. 1) and folds it into P[F] (eq. 2).
         """
         b = np.ascontiguousarray(detection_prob, np.float32).reshape(len(cube_index), self.facing_sectors)
+        if b.size and not (b.min() >= 0.0 and b.max() <= 1.0):  # NaN fails both
+            raise ValueError(f"detection_prob must lie in [0, 1], not in [{b.min()}, {b.max()}]")
         found_prob = self.observe(cube_index, 1.0 - b)  # eq. 1: Σ p(c) b(c, f), before the update
         self.success_prob += (1.0 - self.success_prob) * found_prob  # eq. 2, one more term
         return found_prob
@@ -175,6 +177,9 @@ class TargetBelief:
         if np.any(likelihood < 0) or not np.all(np.isfinite(likelihood)):
             raise ValueError("likelihoods must be finite and non-negative")
         cube_index = np.ascontiguousarray(cube_index, np.int64)
+        if cube_index.size and not (cube_index.min() >= 0 and cube_index.max() < self.grid.num_cubes):
+            raise ValueError(f"cube_index must lie in [0, {self.grid.num_cubes}), not in "
+                             f"[{cube_index.min()}, {cube_index.max()}]")  # the kernel checks no bounds
         saved = self._mass.reshape(-1, self.facing_sectors)[cube_index] if self._outside <= 0 else None  # a copy
         removed = _scale_seen_mass(self._mass.reshape(-1, self.facing_sectors), self._coarse.reshape(-1, self.facing_sectors),
                                    cube_index, likelihood,

@@ -174,6 +174,9 @@ class SearchPlanner:
         every view taken so far. Each view is taken once, as in the report: the same view again would
         repeat what the belief already accounts for, and eq. 4 would count its near-identical image as
         new evidence."""
+        if np.shape(path_lengths_m) != (len(self.positions),):
+            raise ValueError(f"path_lengths_m must have one length per candidate position, shape "
+                             f"({len(self.positions)},), not {np.shape(path_lengths_m)}")
         values = self._values(pose, occupancy)
         self._drop_taken(values, pose, taken, views)
         here_detection = values.find_prob[-1]

@@ -285,3 +285,58 @@ def test_a_facing_with_a_surface_just_in_front_keeps_a_share_once():
     assert np.allclose(mass[10, :, :, 0], before)  # the surface's own cubes: nothing solid 0.2 m out along x
     assert left > 0 and belief.prob_outside + mass.sum() == pytest.approx(1.0, rel=1e-5)
     assert belief.rule_out_blocked_facings(solid, 0.2, 0.3, 0.1) == 0.0  # the map says it again: nothing new
+
+
+def test_the_coarse_copy_kept_through_many_misses_is_the_one_summed_afresh():
+    """A miss that took a cube's mass from the wrong coarse block (its height ignored) passed."""
+    rng = np.random.default_rng(7)
+    belief = TargetBelief(GRID, facing_sectors=4, prob_outside=0.1, coarse_factor=2)  # blocks 2 cubes high
+    for _ in range(20):
+        belief.update_after_miss(*_random_look(rng, belief))
+    rebuilt = TargetBelief(GRID, facing_sectors=4, coarse_factor=2)
+    rebuilt.restore(belief.state())
+    rebuilt.reweight(np.ones(GRID.shape))  # renormalised: its coarse copy summed afresh from the cubes
+    np.testing.assert_allclose(belief.coarse_mass(), rebuilt.coarse_mass(), rtol=1e-5, atol=1e-9)
+
+
+def test_where_stereo_has_depth_the_look_sees_up_to_it_though_the_map_is_empty():
+    """Ignoring the look's own disparity passed: the footprint test's wall was in the map as well."""
+    cam = MOUNT.camera_in_world(Pose2D(0.5, 1.5, 0.0), 0.0, 0.0)
+    disparity = np.full((480, 640), K.fx_px * 0.12 / 1.5, np.float32)  # a wall 1.5 m ahead, in stereo only
+    disparity[:, 320:] = np.nan  # the image's right half has no disparity: the map's depth there
+    depth = visible_depth(disparity, OccupancyGrid(ROOM), cam, K, 0.12, 16, 3.5)
+    np.testing.assert_allclose(depth[:, :20], 1.5, rtol=1e-5)  # 16 px blocks: 20 of 40 columns
+    assert depth[:, 20:].min() > 2.0  # the open room, out to its walls
+
+
+def test_the_maps_depth_is_the_depth_along_the_optical_axis_not_along_the_ray():
+    """The along-ray distance to a mapped wall passed for the depth: every wall was straight ahead."""
+    occ = OccupancyGrid(ROOM)
+    with occ.edit() as (log_odds, observed):
+        log_odds[ROOM.box_slices(np.array([1.5, 0.0, 0.0]), np.array([1.55, 3.0, 2.5]))] = 5.0  # a wall across x = 1.5
+        observed[:] = True
+    cam = MOUNT.camera_in_world(Pose2D(0.5, 1.5, 0.0), 0.0, 0.0)
+    depth = visible_depth(None, occ, cam, K, 0.12, 16, 3.5)
+    np.testing.assert_allclose(depth, 1.5 - cam.translation[0], atol=0.03)  # corners too, 35° off the axis
+
+
+@pytest.mark.parametrize("index", [-1, GRID.num_cubes, GRID.num_cubes + 5])
+def test_a_cube_index_outside_the_grid_is_refused_and_changes_nothing(index):
+    """An index past the grid (read and written out of bounds) or below 0 (wrapped round) passed."""
+    belief = TargetBelief(GRID, facing_sectors=2)
+    before = belief.mass_by_facing()
+    cubes = np.array([0, index])
+    with pytest.raises(ValueError, match=rf"cube_index must lie in \[0, {GRID.num_cubes}\)"):
+        belief.update_after_miss(cubes, np.full((2, 2), 0.5))
+    with pytest.raises(ValueError, match="cube_index"):
+        belief.observe(cubes, np.ones((2, 2)))
+    assert np.array_equal(belief.mass_by_facing(), before) and belief.success_prob == 0.0
+
+
+@pytest.mark.parametrize("b", [-0.1, 1.1, np.nan])
+def test_a_detection_probability_outside_0_to_1_is_refused_by_name(b):
+    """b < 0 passed (a negative P_Ψ); b > 1 was refused as a bad "likelihood"."""
+    belief = TargetBelief(GRID, facing_sectors=2)
+    with pytest.raises(ValueError, match=r"detection_prob must lie in \[0, 1\]"):
+        belief.update_after_miss(np.arange(3), np.full((3, 2), b))
+    assert belief.success_prob == 0.0 and belief.prob_outside == pytest.approx(0.05)

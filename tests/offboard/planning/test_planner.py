@@ -57,6 +57,43 @@ def test_each_cost_function_picks_what_its_equation_says(cost, near):
     assert d.find_prob > 0.1
 
 
+@pytest.mark.parametrize("cost,near", [(2, A_BOX), (3, B_BOX), (4, B_BOX)])
+def test_eq12_bonus_for_nearness_can_outweigh_a_larger_covering_far_away(cost, near):
+    """Eq. 12 read as eq. 10 (covering alone) or as covering × (1 + distance) passed."""
+    # A 0.5 at 3.8 m, B 0.4 at 1.6 m: eq. 10 takes A; eq. 12: 0.5 (1 + 1/3.8) < 0.4 (1 + 1/1.6)
+    planner = _planner(cost, boxes=(replace(A_BOX, weight=0.5), replace(B_BOX, weight=0.4)))
+    d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))
+    box_center = (np.array(near.min[:2]) + np.array(near.max[:2])) / 2
+    assert d.kind == "move" and np.hypot(*(np.array(d.position_m) - box_center)) < 1.0, d.reason
+
+
+def test_a_one_sided_target_is_worth_a_look_from_in_front_of_its_face_only():
+    """A facing cosine of the wrong sign (faces seen from behind) passed: every decision had one sector."""
+    belief = TargetBelief(ROOM, facing_sectors=8, prob_outside=0.0)
+    belief.set_prior(hints(ROOM, (replace(B_BOX, weight=1.0),)), prob_outside=0.0)
+    box = np.flatnonzero(belief.target_prob.reshape(-1) > 0)
+    facing_x = np.zeros((len(box), 8))
+    facing_x[:, 0] = 1.0  # sector 0: the face's normal points along +x
+    belief.observe(box, facing_x)
+    planner = SearchPlanner(belief, PlannerConfig(), DetectabilityTable.nominal(near_m=0.3, far_m=1.5, max_facing_deg=90),
+                            TIME, K, MOUNT)
+    planner.positions = np.array([[3.2, 1.5], [1.8, 1.5]])  # 0.7 m in front of the box's face, 0.7 m behind it
+    d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))
+    front, back = d.values.find_prob[:2].max(axis=1)
+    assert front > 0.5 and back < 0.01
+    assert d.kind == "move" and d.position_m == (3.2, 1.5), d.reason
+    assert abs(np.angle(np.exp(1j * (d.azimuth_rad - math.pi)))) <= math.radians(25.0)  # looking back along -x
+
+
+@pytest.mark.parametrize("lengths", [np.zeros(1), np.zeros((15, 1)), np.zeros(16)])
+def test_path_lengths_of_another_shape_than_one_per_candidate_are_refused(lengths):
+    """A length-1 array was broadcast over every candidate."""
+    planner = _planner(3)
+    assert len(planner.positions) == 15
+    with pytest.raises(ValueError, match=r"path_lengths_m must have one length per candidate position, shape \(15,\)"):
+        planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), lengths)
+
+
 def test_the_paper_lab_has_544_actions():
     belief = TargetBelief(VoxelGrid((9.0, 5.0, 2.5), 0.05))
     planner = SearchPlanner(belief, PlannerConfig(), DetectabilityTable.nominal(), TIME, K, MOUNT)
@@ -248,13 +285,18 @@ def test_a_view_taken_on_an_earlier_stay_is_not_taken_again_from_that_place_here
 
 
 def test_cost_1_moves_carry_their_setting_and_never_to_where_the_robot_stands():
+    """A move to a candidate within same_position_m passed: no case had one that sees better than here."""
     planner = _planner(1)
     d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))
     assert d.kind == "move" and 0 <= d.setting < len(planner.settings)
     assert d.find_prob == pytest.approx(d.values.find_prob[:-1].max())
-    at_vertex = Pose2D(1.0, 1.0, 0.0)  # the robot stands on a candidate: that one is "here", not a move
-    d2 = planner.decide(at_vertex, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, at_vertex))
-    assert d2.kind == "look" or np.hypot(d2.position_m[0] - 1.0, d2.position_m[1] - 1.0) > 0.5
+    # B is seen better from the candidate (2, 1), 0.3 m away, than from here: that one is "here", not a move
+    planner = _planner(1, boxes=(replace(B_BOX, weight=1.0),))
+    near_vertex = Pose2D(1.7, 1.0, 0.0)
+    d2 = planner.decide(near_vertex, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, near_vertex))
+    beside = np.flatnonzero(np.all(planner.positions == (2.0, 1.0), axis=1))[0]
+    assert d2.values.find_prob[beside].max() > d2.values.find_prob[-1].max()
+    assert d2.kind == "move" and np.hypot(d2.position_m[0] - 1.7, d2.position_m[1] - 1.0) > 0.5, d2.reason
 
 
 def test_viewpoints_are_aimed_at_the_unseen_facing_of_a_mass():
