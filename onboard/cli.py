@@ -362,10 +362,12 @@ def run_probe(argv: list[str]) -> int:
     parser.add_argument("--baud", type=int, default=9600)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
+    if args.port is not None and not args.port.strip():  # an empty variable in a script: not "every port"
+        parser.error("--port: empty; give a serial port's path or URL, or leave --port out to probe every port")
     _setup_logging(False)
     from onboard.probe import describe, identify_port, probe_all
 
-    if args.port:
+    if args.port is not None:
         answer = identify_port(args.port, args.baud)
         sys.stdout.write((json.dumps(answer) if args.json else describe(answer)) + "\n")
         return 0 if answer["device"] != "unknown" else 1

@@ -51,3 +51,12 @@ def test_a_port_that_hangs_up_at_once_is_reported_not_raised():
         hang_up.start()
         answer = identify_port(f"socket://127.0.0.1:{port}")
     assert answer["device"] == "unknown" and "pioneer: " in answer["error"]
+
+
+def test_an_empty_port_is_refused_not_taken_for_every_port(capsys):
+    """`--port ""` (an unset variable in a script) probed every port and exited 0."""
+    from onboard.cli import run_probe
+
+    with pytest.raises(SystemExit) as exit_:
+        run_probe(["--port", " "])
+    assert exit_.value.code == 2 and "--port: empty" in capsys.readouterr().err

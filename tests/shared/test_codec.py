@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from shared import messages as m
-from shared.codec import ProtocolError, decode, encode
+from shared.codec import MAX_PAYLOAD_BYTES, ProtocolError, decode, encode
 from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
 
 POSE = m.PoseMsg(1.5, 2.0, 90.0)
@@ -185,3 +185,14 @@ def test_a_robot_that_says_capture_takes_no_time_is_refused():
     with pytest.raises(ProtocolError) as err:
         decode(encode(info), m.Info)
     assert err.value.field == "camera.capture_s"
+
+
+def test_a_payload_over_the_limit_is_refused_before_it_is_unpacked(monkeypatch):
+    import shared.codec
+
+    payload = encode(m.LookCommand("x", 10.0, 0.0))
+    assert decode(payload, m.LookCommand).pan_deg == 10.0
+    monkeypatch.setattr(shared.codec, "MAX_PAYLOAD_BYTES", len(payload) - 1)
+    with pytest.raises(ProtocolError, match=rf"payload larger than {len(payload) - 1} bytes \(got '{len(payload)} bytes'\)"):
+        decode(payload, m.LookCommand)
+    assert MAX_PAYLOAD_BYTES >= 2 * 1280 * 960 * 3  # a raw stereo pair of 1280 × 960 colour images passes
