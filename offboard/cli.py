@@ -100,7 +100,8 @@ def _add_search_args(parser: argparse.ArgumentParser) -> None:
                         help="a detector's measured detectability table (from calibrate-detector)")
     parser.add_argument("--config", type=Path, metavar="FILE.toml",
                         help="search configuration (SearchConfig); the options above override its values")
-    parser.add_argument("--out", type=Path, default=Path("search-out"), metavar="DIR")
+    parser.add_argument("--out", type=Path, default=Path("search-out"), metavar="DIR",
+                        help="summary, looks, logs, recording and checkpoint (default: search-out)")
     parser.add_argument("--resume", type=Path, metavar="DIR",
                         help="carry on the search checkpointed in DIR with its own options (a transport flag given replaces "
                              "its saved setting)")
@@ -331,15 +332,15 @@ def _parser() -> argparse.ArgumentParser:
     _add_search_args(search)
     search.set_defaults(func=_search)
     demo = sub.add_parser("demo", help="start a simulated robot and search with it (two processes, loopback)")
-    demo.add_argument("--world", default="paper-lab")
+    demo.add_argument("--world", default="paper-lab", help="a bundled world or a world file (default: paper-lab)")
     demo.add_argument("--room", type=floats(3, "--room", positive=True), metavar="X,Y,Z",
                       help="the search region (default: the world's room)")
-    demo.add_argument("--out", type=Path, default=Path("demo-out"), metavar="DIR")
+    demo.add_argument("--out", type=Path, default=Path("demo-out"), metavar="DIR", help="default: demo-out")
     demo.add_argument("--spawn", action="store_true", help="also stream to a new Rerun viewer")
     demo.set_defaults(func=_demo)
     tour = sub.add_parser("tour", help="drive a short scripted tour and save the captures")
     add_transport_args(tour)
-    tour.add_argument("--out", type=Path, default=Path("tour-out"), metavar="DIR")
+    tour.add_argument("--out", type=Path, default=Path("tour-out"), metavar="DIR", help="default: tour-out")
     tour.set_defaults(func=_tour)
     calibrate = sub.add_parser("calibrate-detector", help="measure a detector's detectability table in simulation")
     calibrate.add_argument("--detector", choices=("sift", "ncc"), default="sift")

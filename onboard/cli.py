@@ -222,8 +222,8 @@ def run_worlds(argv: list[str]) -> int:
     views = commands.add_parser("views", help="render stereo pairs with true depth of worlds, to score stereo on")
     views.add_argument("--worlds", required=True, metavar="NAMES",
                        help=f"comma-separated suites ({suites}), bundled names, world files or folders of them")
-    views.add_argument("--per-world", type=int, default=25, metavar="N")
-    views.add_argument("--seed", type=int, default=0, metavar="S")
+    views.add_argument("--per-world", type=int, default=25, metavar="N", help="views per world (default: 25)")
+    views.add_argument("--seed", type=int, default=0, metavar="S", help="default: 0")
     views.add_argument("--out", type=Path, required=True, metavar="DIR")
     check = commands.add_parser("check", help="check worlds as the simulator loads them: the format, textures and "
                                               "pictures, and the robot fits")

@@ -1,4 +1,4 @@
 """The benchmarks: each prints one JSON object of medians.
 
-May import: anything in ``offboard`` and ``shared``.
+May import: ``shared`` and every ``offboard`` subpackage but ``fuzz``.
 """

@@ -523,7 +523,7 @@ def _list(kind: type, allowed: tuple | None = None):
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("experiment-out"), metavar="DIR",
-                        help="results.csv, report.md, plots and one folder per run; a rerun resumes")
+                        help="results.csv, report.md, plots and one folder per run; a rerun resumes (default: experiment-out)")
     parser.add_argument("--preset", choices=sorted(PRESETS), default="paper",
                         help="the grid to start from (paper: the report's 160 runs); the options below override it")
     parser.add_argument("--baselines", action="store_true", help="add every baseline to the methods")
@@ -541,7 +541,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="use these robot starts instead (repeatable)")
     parser.add_argument("--target", type=floats(4, "--target"), action="append", metavar="X,Y,Z,YAW_DEG",
                         help="use these target placements instead (repeatable)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N", help="runs at once")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N",
+                        help="runs at once (default: the number of CPUs)")
     parser.add_argument("--budget-s", type=float, metavar="SECONDS",
                         help="robot-time budget K (default: the --config file's, 1800)")
     parser.add_argument("--move-threshold", type=probability("--move-threshold"), metavar="P",
