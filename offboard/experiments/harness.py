@@ -449,18 +449,39 @@ def _flat(tree: dict, prefix: str = "") -> dict[str, object]:
 
 def _checked_settings(settings: SweepSettings) -> dict:
     """The sweep's settings, to record in ``--out`` once it starts; refuses (:class:`SweepRefused`) a
-    folder whose rows ran with others: their figures would be mixed in one report, silently."""
+    folder whose rows ran with others: their figures would be mixed in one report, silently. The code
+    is recorded too, each version its rows ran on, with a warning when it changed (a commit of docs
+    changes no figure, so that is not refused)."""
     path, now = settings.out / SETTINGS_FILE, run_settings(settings)
+    codes = [code_version()]
     if path.is_file():
-        before, after = _flat(json.loads(path.read_text())), _flat(now)
+        recorded = json.loads(path.read_text())
+        codes = list(dict.fromkeys([*recorded.pop(CODE_KEY, []), *codes]))
+        before, after = _flat(recorded), _flat(now)
         differ = [f"{k} {before.get(k)!r} there, {after.get(k)!r} now" for k in sorted(before.keys() | after.keys())
                   if before.get(k) != after.get(k)]
         if differ:
             raise SweepRefused(f"{settings.out} holds runs with other settings ({'; '.join(differ)}): "
                                "use another --out")
+        if len(codes) > 1:
+            log.warning("%s: its rows ran on code %s; this sweep runs %s", settings.out, ", ".join(codes[:-1]),
+                        codes[-1])
     elif (settings.out / "results.csv").is_file():
         log.warning("%s has no %s: its runs are taken to have these settings", settings.out, SETTINGS_FILE)
-    return now
+    return {**now, CODE_KEY: codes}
+
+
+CODE_KEY = "code"  # in sweep.json: every version of the code its rows ran on, oldest first
+
+
+def code_version() -> str:
+    """``git describe --always --dirty`` of the checkout the harness runs from, or "unknown"."""
+    try:
+        done = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=Path(__file__).resolve().parent,
+                              capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.TimeoutExpired):
+        return "unknown"
+    return done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else "unknown"
 
 
 def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progress], None] | None = None) -> Progress:

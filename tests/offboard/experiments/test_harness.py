@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 import subprocess
@@ -164,6 +165,30 @@ def test_a_sweep_does_not_resume_into_a_folder_swept_with_other_settings(tmp_pat
     assert experiment.sweep(runs, experiment.SweepSettings(out, jobs=1, config_path=same)).done == 1
     assert experiment.main(experiment_args("--limit", "1", "--jobs", "1", "--out", str(out))) == 2
     assert any("holds runs with other settings" in r.getMessage() for r in caplog.records if r.levelname == "ERROR")
+
+
+def test_a_sweep_records_each_version_of_the_code_its_rows_ran_on(tmp_path, monkeypatch, caplog):
+    """Nothing said which code a folder's rows came from, so a resume after a change mixed two
+    versions in one report silently."""
+    world = load_facts("paper-lab")
+    runs = build_runs(PAPER)[:2]
+    monkeypatch.setattr(experiment, "_prepare", lambda todo, out: {})
+    monkeypatch.setattr(experiment, "_execute", lambda run, *_: make_row(run, world, SUMMARY, 1.0))
+    out = tmp_path / "out"
+    monkeypatch.setattr(experiment, "code_version", lambda: "v1")
+    experiment.sweep(runs[:1], experiment.SweepSettings(out, jobs=1))
+    monkeypatch.setattr(experiment, "code_version", lambda: "v2-dirty")
+    assert experiment.sweep(runs, experiment.SweepSettings(out, jobs=1)).done == 1  # a new version is no refusal
+    assert json.loads((out / experiment.SETTINGS_FILE).read_text())["code"] == ["v1", "v2-dirty"]
+    assert "its rows ran on code v1; this sweep runs v2-dirty" in caplog.text
+
+
+def test_the_code_version_is_the_checkouts():
+    checkout = Path(experiment.__file__).resolve().parents[2]
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=checkout, capture_output=True, text=True)
+    if head.returncode != 0:
+        pytest.skip("not run from a git checkout")
+    assert experiment.code_version().startswith(head.stdout.strip()[:7])
 
 SMALL_ROOM = """
 name = "{name}"
