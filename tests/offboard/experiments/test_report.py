@@ -296,6 +296,7 @@ def test_the_calibration_bins_looks_and_checks_each_bin_with_enough_looks(tmp_pa
     assert "| [0.2, 0.4) | 20 | 0.300 | 0.280 | 0.250 | PASS |" in text
     assert "| [0.4, 1] | 3 | 0.500 | 0.100 | 1.000 | — (< 20 looks) |" in text
     assert "Calibration overall: **FAIL** (1/2 checked bins pass)." in text
+    assert "the check is of the planner's arithmetic" in text  # not of the model against the world
     assert "## Coverage: what the looks rule out" in text and "Over the SYT runs (office; seeds 0,1" in text
 
 
