@@ -452,23 +452,23 @@ def _checked_settings(settings: SweepSettings) -> dict:
     folder whose rows ran with others: their figures would be mixed in one report, silently. The code
     is recorded too, each version its rows ran on, with a warning when it changed (a commit of docs
     changes no figure, so that is not refused)."""
-    path, now = settings.out / SETTINGS_FILE, run_settings(settings)
-    codes = [code_version()]
+    path, now, current = settings.out / SETTINGS_FILE, run_settings(settings), code_version()
+    codes = []
     if path.is_file():
         recorded = json.loads(path.read_text())
-        codes = list(dict.fromkeys([*recorded.pop(CODE_KEY, []), *codes]))
+        codes = recorded.pop(CODE_KEY, [])
         before, after = _flat(recorded), _flat(now)
         differ = [f"{k} {before.get(k)!r} there, {after.get(k)!r} now" for k in sorted(before.keys() | after.keys())
                   if before.get(k) != after.get(k)]
         if differ:
             raise SweepRefused(f"{settings.out} holds runs with other settings ({'; '.join(differ)}): "
                                "use another --out")
-        if len(codes) > 1:
-            log.warning("%s: its rows ran on code %s; this sweep runs %s", settings.out, ", ".join(codes[:-1]),
-                        codes[-1])
+        others = [c for c in codes if c != current]
+        if others:
+            log.warning("%s: its rows ran on code %s; this sweep runs %s", settings.out, ", ".join(others), current)
     elif (settings.out / "results.csv").is_file():
         log.warning("%s has no %s: its runs are taken to have these settings", settings.out, SETTINGS_FILE)
-    return {**now, CODE_KEY: codes}
+    return {**now, CODE_KEY: codes if current in codes else [*codes, current]}
 
 
 CODE_KEY = "code"  # in sweep.json: every version of the code its rows ran on, oldest first
@@ -496,8 +496,8 @@ def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progr
     todo = [r for r in runs if r.key not in done]
     progress = Progress(total=len(runs), skipped=len(runs) - len(todo))
     prepared = _prepare(todo, settings.out)
-    # only now: a sweep refused before it starts must not bind the folder to settings no run had
-    (settings.out / SETTINGS_FILE).write_text(json.dumps(recorded, indent=2) + "\n")
+    if todo:  # only now, and only with runs to do: the folder is bound to settings and code its runs have
+        (settings.out / SETTINGS_FILE).write_text(json.dumps(recorded, indent=2) + "\n")
     workers = _Workers(settings.jobs, settings.out / "workers")
     if on_progress:
         on_progress(progress)
