@@ -41,14 +41,16 @@ def request(session: zenoh.Session, key: str, command: Any, expected: type[T], t
                 raise ProtocolError("command_id", echoed, f"reply does not echo {command.command_id!r}")
             return result
         payload = reply.err.payload.to_bytes()
+        if payload == b"Timeout":  # Zenoh's own answer to a query held past its timeout
+            raise RobotUnavailable(f"no reply from {key} within {timeout_s:g} s: {_ASK}")
         try:
             error = decode(payload, ErrorReply)
-        except ProtocolError:  # not the agent's answer: Zenoh's own (a timeout, a dropped route)
+        except ProtocolError:  # not the agent's answer: Zenoh's own (a dropped route)
             raise RobotUnavailable(f"{key}: {payload[:200].decode('utf-8', 'replace')}") from None
         raise CommandError(key, error)
-    waited_s = time.monotonic() - started
-    if waited_s < timeout_s:  # Zenoh ended the query early: nobody serves the key, or its server went away
-        raise RobotUnavailable(f"nobody answered {key} (the query ended after {waited_s:.1f} s of its {timeout_s:g}): "
-                               "is the onboard agent running and reachable (--connect/--listen)?")
-    raise RobotUnavailable(f"no reply from {key} within {timeout_s:g} s: is the onboard agent running "
-                           "and reachable (--connect/--listen)?")
+    # no reply at all: Zenoh ended the query, as nobody serves the key or its server went away
+    raise RobotUnavailable(f"nobody answered {key} (the query ended after {time.monotonic() - started:.1f} s of its "
+                           f"{timeout_s:g}): {_ASK}")
+
+
+_ASK = "is the onboard agent running and reachable (--connect/--listen)?"

@@ -195,7 +195,7 @@ def _stop_after_failure(robot: RobotClient) -> None:
     try:
         robot.stop()
     except (RobotUnavailable, CommandError) as exc:  # a robot that is gone cannot be stopped from here
-        log.error("could not stop the robot after the search failed: %s", exc)
+        log.warning("could not stop the robot after the search failed: %s", exc)  # the failure is the error
 
 
 def _chain(first: Callable[[Search], None], then: Callable[[Search], None] | None) -> Callable[[Search], None]:

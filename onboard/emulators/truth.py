@@ -102,7 +102,7 @@ def truth_from_dict(d: dict) -> Truth:
         raise TruthLinkError(f"truth link: a truth reply lacks {', '.join(missing)}")
     for key in _TRUTH_NUMBERS:
         value = d[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite(value):
             raise TruthLinkError(f"truth link: a truth reply's {key} must be a finite number, got {value!r}")
     if not isinstance(d["head_moving"], bool):
         raise TruthLinkError(f"truth link: a truth reply's head_moving must be true or false, got {d['head_moving']!r}")
@@ -111,6 +111,13 @@ def truth_from_dict(d: dict) -> Truth:
 
 
 _TRUTH_NUMBERS = ("x_m", "y_m", "heading_rad", "pan_rad", "tilt_rad")
+
+
+def _finite(value: int | float) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # a JSON integer beyond any float
+        return False
 
 
 def placement_from_dict(d: dict) -> WorldPlacement:

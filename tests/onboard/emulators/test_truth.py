@@ -63,7 +63,7 @@ def test_decoding_refuses_what_is_not_a_truth():
         decode(b"[1, 2]\n")
     good = {"x_m": 1.0, "y_m": 0, "heading_rad": 0, "pan_rad": 0, "tilt_rad": 0, "head_moving": False}
     assert truth_from_dict(good).pose.x_m == 1.0
-    for key, value in (("x_m", "nan"), ("x_m", "1.5"), ("y_m", True), ("tilt_rad", float("inf")),
+    for key, value in (("x_m", "nan"), ("x_m", "1.5"), ("y_m", True), ("tilt_rad", float("inf")), ("pan_rad", 10**400),
                        ("head_moving", "no"), ("head_moving", 1)):  # "1.5", true and "no" were taken
         with pytest.raises(TruthLinkError, match=f"truth reply's {key} must be"):
             truth_from_dict({**good, key: value})
