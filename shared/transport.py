@@ -89,7 +89,7 @@ class TransportConfig:
 
 def add_transport_args(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("transport (Zenoh)")
-    group.add_argument("--robot", metavar="ID", help="robot id: keys live under syt/<ID>/ (default: syt)")
+    group.add_argument("--robot", metavar="ID", help="robot id: keys live under syt/<ID>/ (default: syt; on a resume, the saved one)")
     group.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                        help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable)")
     group.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",

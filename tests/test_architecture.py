@@ -20,10 +20,10 @@ OFFBOARD_LAYERS = {
     "bench": {"robot", "perception", "planning", "navigation", "search", "experiments"},
     "fuzz": {"robot", "perception", "planning", "navigation", "search", "experiments"},
 }
-PURE = {"planning": {"zenoh", "rerun"}}
+PURE = {"planning": {"zenoh", "rerun"}}  # the planner does no I/O: no transport, no recording
 # onboard backend -> the onboard modules it must not import: a robot runs its drivers without the
 # simulator, and the simulator runs without the drivers (both share onboard.devices and onboard.config)
-ONBOARD_BACKENDS = {"sim": ("onboard.hardware", "onboard.emulators"), "hardware": ("onboard.sim", "onboard.emulators")}  # the planner does no I/O: no transport, no recording
+ONBOARD_BACKENDS = {"sim": ("onboard.hardware", "onboard.emulators"), "hardware": ("onboard.sim", "onboard.emulators")}
 
 
 def _imported_modules(path: Path) -> set[str]:

@@ -178,7 +178,7 @@ def calibration_md(bins: list[CalibrationBin], source: str) -> list[str]:
     lines += [f"{total} looks of {source}, binned by the detection probability the planner expected. Realised P: "
               f"the mass the exact update removed. Check: |mean expected − mean realised| ≤ {TOLERANCE:.0%} of the "
               f"mean expected, in every bin with ≥ {MIN_LOOKS} looks. Both come from the same belief and detector "
-              "table, so the check is of the planner's arithmetic (20 cm blocks against the update's cubes), not of "
+              "table, so the check is of the planner's arithmetic (coarse blocks against the update's cubes), not of "
               "the model against the world: the hit rate is that (weak and false detections count as hits).", "",
               "| Expected P | Looks | Mean expected P | Mean realised P | Hit rate | Check |", "|---" * 6 + "|"]
     for b in bins:

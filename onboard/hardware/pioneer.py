@@ -40,8 +40,6 @@ _SIP_PERIOD_S = 0.1
 _BRAKING_MARGIN = 0.8  # plan to brake at 80 % of the deceleration the firmware was given
 
 
-
-
 @dataclass(frozen=True)
 class _Status:
     """What the latest SIP said, in the driver's terms."""

@@ -34,8 +34,6 @@ from shared.limits import PanTiltLimits
 log = logging.getLogger(__name__)
 
 
-
-
 class PtuLink:
     """One serial port to a unit: one command, one answer, unprompted events set aside."""
 

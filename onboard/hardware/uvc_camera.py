@@ -31,8 +31,6 @@ from shared.geometry import HeadMount
 log = logging.getLogger(__name__)
 
 
-
-
 class UvcStereoCamera:
     """``StereoCamera`` over ``cv2.VideoCapture``; raises ``DeviceFault`` when the camera fails."""
 

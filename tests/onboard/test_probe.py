@@ -53,10 +53,11 @@ def test_a_port_that_hangs_up_at_once_is_reported_not_raised():
     assert answer["device"] == "unknown" and "pioneer: " in answer["error"]
 
 
-def test_an_empty_port_is_refused_not_taken_for_every_port(capsys):
+@pytest.mark.parametrize("port", ["", " "])
+def test_an_empty_port_is_refused_not_taken_for_every_port(capsys, port):
     """`--port ""` (an unset variable in a script) probed every port and exited 0."""
     from onboard.cli import run_probe
 
     with pytest.raises(SystemExit) as exit_:
-        run_probe(["--port", " "])
+        run_probe(["--port", port])
     assert exit_.value.code == 2 and "--port: empty" in capsys.readouterr().err
