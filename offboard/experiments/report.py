@@ -406,16 +406,17 @@ def spl_margins(rows: list[dict], cost: int = 3) -> list[SplMargin]:
         return {placement(r): r for r in rows
                 if r["method"] == method and r["prior"] == prior and (method != "syt" or r["cost"] == cost)}
 
-    def spl(method: str, prior: str) -> dict[tuple, float]:
-        return {key: r["spl"] or 0.0 for key, r in runs(method, prior).items()}
+    def spl(by_key: dict[tuple, dict]) -> dict[tuple, float]:
+        return {key: r["spl"] or 0.0 for key, r in by_key.items()}
 
     out = []
     for prior in dict.fromkeys(r["prior"] for r in rows if r["method"] == "syt"):
-        syt, syt_runs = spl("syt", prior), runs("syt", prior)
+        syt_runs = runs("syt", prior)
+        syt = spl(syt_runs)
         for name in dict.fromkeys(r["method"] for r in rows if r["method"] != "syt"):
             ran = list(dict.fromkeys(r["prior"] for r in rows if r["method"] == name))
             their_prior = prior if prior in ran else ran[0] if len(ran) == 1 else None
-            theirs = spl(name, their_prior) if their_prior else {}
+            theirs = spl(runs(name, their_prior)) if their_prior else {}
             common = sorted(set(syt) & set(theirs), key=str)
             if not common:
                 continue
@@ -500,13 +501,6 @@ def prior_gains(rows: list[dict], reference: str = "uniform") -> list[PriorGain]
                              len(both), mean_of([a for a, _ in both]), mean_of([b for _, b in both]),
                              len(_per_scenario(diffs)), scope([a for a, _ in pairs])))
     return out
-
-
-def paired_times(rows: list[dict], cost: int = 3) -> list[tuple[str, int, float | None, float | None]]:
-    """Per baseline: (name, scenarios both found, SYT's mean minutes there, the baseline's), each run's
-    minutes its ``time_min``: robot time and measured processing."""
-    return [(name, len(common), mean_of([syt[s]["time_min"] for s in common]),
-             mean_of([mine[s]["time_min"] for s in common])) for name, common, syt, mine in _timed_pairs(rows, cost)]
 
 
 def _timed_pairs(rows: list[dict], cost: int = 3) -> list[tuple[str, list[tuple], dict, dict]]:
@@ -690,17 +684,21 @@ def _margins_md(rows: list[dict]) -> list[str]:
 
 def _yardsticks_md(margins: list[SplMargin]) -> str:
     """What a baseline given the truth is: a strong reference, and why it is not a bound."""
+    from offboard.experiments.baselines import BaselineConfig  # here: it brings the planner, which the report needs not
+    from offboard.experiments.world_facts import SeeingCriteria
+
     names = ", ".join(YARDSTICKS)
     ahead = "; ".join(f"SYT with prior `{m.prior}` scores above {m.baseline} in {m.syt_ahead} of {m.scenarios} "
                       "paired runs" for m in margins if m.baseline in YARDSTICKS)
     return (f"{names.capitalize()} is given the truth: a strong reference, not a rival, and not a bound on what a "
-            "search can reach: it drives to a stricter viewpoint (a detection rate of 0.9, with margins) than SPL's "
-            "shortest path is measured to (0.8), so a search that sees the target from nearer can score a higher "
+            f"search can reach: it drives to a stricter viewpoint (a detection rate of "
+            f"{BaselineConfig().oracle_view.min_rate:g}, with margins) than SPL's shortest path is measured to "
+            f"({SeeingCriteria().min_rate:g}), so a search that sees the target from nearer can score a higher "
             "SPL" + (f" ({ahead})." if ahead else "."))
 
 
 def _paired_md(rows: list[dict]) -> list[str]:
-    pairs = paired_times(rows)
+    pairs = _timed_pairs(rows)
     if not pairs:
         return ["No baseline runs (`--baselines`).", ""]
     lines = _margins_md(rows) + [
@@ -708,10 +706,11 @@ def _paired_md(rows: list[dict]) -> list[str]:
              "both SYT with cost 3 and the baseline solved; in brackets, the scenarios (world × start × target) they "
              "are of:", "", "| Baseline | Runs (scenarios) | SYT (min) | Baseline (min) | SYT ahead | Worlds; seeds |",
              "|---" * 6 + "|"]
-    for (name, n, mine, theirs), (_, common, syt, _) in zip(pairs, _timed_pairs(rows)):
+    for name, common, syt, theirs_by_scenario in pairs:  # each run's minutes: robot time and measured processing
+        mine, theirs = (mean_of([runs[s]["time_min"] for s in common]) for runs in (syt, theirs_by_scenario))
         ahead = "—" if mine is None or theirs is None else ("yes" if mine < theirs else "no")
         scenarios = len({s[:3] for s in common})
-        lines.append(f"| {name} | {n} ({scenarios}) | {cell(mine)} | {cell(theirs)} | {ahead} | "
+        lines.append(f"| {name} | {len(common)} ({scenarios}) | {cell(mine)} | {cell(theirs)} | {ahead} | "
                      f"{scope([syt[s] for s in common]) if common else '—'} |")
     return lines + [""]
 
