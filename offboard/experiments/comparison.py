@@ -162,16 +162,14 @@ def _errored(row: dict) -> bool:
 
 
 def _paired_latency(variant: str, pairs: list[tuple[dict, dict]]) -> PairedLatency | None:
-    timed = [(a["planning_ms_p95"], b["planning_ms_p95"], placement(a)) for a, b in pairs
-             if a["planning_ms_p95"] is not None and b["planning_ms_p95"] is not None]
+    timed = [(a, b) for a, b in pairs if a["planning_ms_p95"] is not None and b["planning_ms_p95"] is not None]
     if not timed:
         return None
-    base, new = np.array([t[0] for t in timed]), np.array([t[1] for t in timed])
-    diffs = {key: b - a for a, b, key in timed}
+    base, new = (np.array([p[i]["planning_ms_p95"] for p in timed]) for i in (0, 1))
+    diffs = {placement(a): b["planning_ms_p95"] - a["planning_ms_p95"] for a, b in timed}
     return PairedLatency(variant, len(timed), float(np.median(base)), float(np.median(new)),
                          float(np.percentile(base, 95)), float(np.percentile(new, 95)), scenario_mean(diffs),
-                         paired_stderr(diffs), scope([a for a, b in pairs if a["planning_ms_p95"] is not None
-                                                      and b["planning_ms_p95"] is not None]))
+                         paired_stderr(diffs), scope([a for a, _ in timed]))
 
 
 # --- output ----------------------------------------------------------------------------------------
