@@ -14,6 +14,14 @@ import re
 from typing import Any
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+_NOT_IN_COMMENT = re.compile(r"[\x00-\x08\x0b-\x1f\x7f]")  # a comment may hold a tab, and no other control
+
+
+def comment(text: str) -> str:
+    """``text`` as ``#`` lines, one per line of it, each control character a comment cannot hold
+    spelled out as an escape: no text can end the comment and start a line of the file's own."""
+    return "".join(("# " + _NOT_IN_COMMENT.sub(lambda m: repr(m.group())[1:-1], line)).rstrip() + "\n"
+                   for line in text.splitlines())
 
 
 def dumps(data: dict[str, Any]) -> str:

@@ -415,7 +415,7 @@ def _texture(value: Any, key: str) -> str | None:
 
 def world_toml(data: dict[str, Any], comment: str = "") -> str:
     """World data (what ``parse_world`` reads) as TOML text, under ``comment`` as ``#`` lines."""
-    return "".join(f"# {line}".rstrip() + "\n" for line in comment.splitlines()) + toml_writer.dumps(data)
+    return toml_writer.comment(comment) + toml_writer.dumps(data)
 
 
 # ----------------------------------------------------------------------------- validation
@@ -461,14 +461,22 @@ def _validate_target(world: World, size: np.ndarray) -> None:
     _validate_support(world)
 
 
+def support_of(boxes: Iterable, x: float, y: float, z: float):
+    """The box (anything with ``min_m`` and ``max_m``) whose top a target's bottom centre (x, y, z)
+    rests on, within the contact tolerance; None: none does (it stands on the floor, or on nothing)."""
+    return next((b for b in boxes if abs(b.max_m[2] - z) <= _TOL_M and _over(b, x, y)), None)
+
+
+def _over(box, x: float, y: float) -> bool:
+    return box.min_m[0] - _TOL_M <= x <= box.max_m[0] + _TOL_M and box.min_m[1] - _TOL_M <= y <= box.max_m[1] + _TOL_M
+
+
 def _validate_support(world: World) -> None:
     """The target's bottom rests on the floor or on the top of an obstacle under its centre: the
     simulator has no gravity, so a target in the air would render and be searched for as if held up."""
     x, y, z = world.target.position_m
-    under = [b for b in world.obstacles if b.min_m[0] - _TOL_M <= x <= b.max_m[0] + _TOL_M
-             and b.min_m[1] - _TOL_M <= y <= b.max_m[1] + _TOL_M]
-    if min(abs(z - top) for top in [0.0, *(b.max_m[2] for b in under)]) > _TOL_M:
-        tops = "".join(f", {b.name!r} at {b.max_m[2]:g} m" for b in under)
+    if abs(z) > _TOL_M and support_of(world.obstacles, x, y, z) is None:
+        tops = "".join(f", {b.name!r} at {b.max_m[2]:g} m" for b in world.obstacles if _over(b, x, y))
         raise WorldError(f"target.position: the target's bottom is {z:g} m high and rests on nothing: the tops "
                          f"at its centre ({x:g}, {y:g}) are the floor at 0 m{tops} (tolerance {_TOL_M * 1000:g} mm)")
 

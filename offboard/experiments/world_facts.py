@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import math
-import re
 import subprocess
 import sys
 from dataclasses import dataclass, field, replace
@@ -30,7 +29,7 @@ from shared import toml_writer
 from shared.geometry import HeadMount
 from shared.limits import PanTiltLimits
 from shared.strict import bounds
-from shared.world import Box, is_bundled_room, load_world, resolve_world
+from shared.world import Box, is_bundled_room, load_world, resolve_world, support_of
 
 Vec3 = tuple[float, float, float]
 Start = tuple[float, float, float]  # x, y, heading° (the agent's --start)
@@ -38,7 +37,6 @@ Placement = tuple[float, float, float, float]  # x, y, z of the bottom centre, y
 TABLE_KINDS = ("table", "desk")  # the surfaces of the "tables" prior and of the target placements
 DRIVE_CLEARANCE_M = 0.31  # what the navigator keeps from obstacles: the robot's radius 0.26 + its margin 0.05
 ARRIVAL_MARGIN_M = 0.25  # how far from where it was sent a robot may stop (the oracle's "arrived")
-_COMMENT_REFUSES = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")  # TOML comments may hold a tab, no other control
 
 
 # --- the truth -------------------------------------------------------------------------------------
@@ -261,8 +259,7 @@ class WorldFacts:
     def support(self, target: Placement) -> Box | None:
         """The obstacle the target stands on (``None``: the floor)."""
         x, y, z, _ = target
-        return next((b for b in self.obstacles if abs(b.max_m[2] - z) < 1e-3
-                     and b.min_m[0] <= x <= b.max_m[0] and b.min_m[1] <= y <= b.max_m[1]), None)
+        return support_of(self.obstacles, x, y, z)
 
     def picture_file(self, folder: Path) -> Path:
         """The target's picture as a file the planner can read: the world's own image, else the
@@ -415,10 +412,5 @@ def tables_hints(world: WorldFacts, layer_m: float = 0.3, mass: float = 0.9) -> 
               "weight": round(mass / len(tables), 6)} for t in tables]
     about = (f"the target is on a {kinds} of {world.name}: {mass:g} of the mass just above their tops, "
              "the same on each")
-    return _comment(about) + toml_writer.dumps({"hint": hints})  # dumps escapes the names
+    return toml_writer.comment(about) + toml_writer.dumps({"hint": hints})  # both escape what the names hold
 
-
-def _comment(text: str) -> str:
-    """A TOML comment line of ``text``: the control characters a comment may not hold (a newline
-    would start a line of the file's own) spelled out as escapes."""
-    return "# " + _COMMENT_REFUSES.sub(lambda m: repr(m.group())[1:-1], text) + "\n"

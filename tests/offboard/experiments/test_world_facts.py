@@ -153,7 +153,8 @@ def test_the_tables_hints_file_reads_back_whatever_the_names_hold(tmp_path):
     hints_file.write_text(tables_hints(world))
     hints = load_config(HintsFile, hints_file).hint
     assert [(h.name, h.weight) for h in hints] == [("shelf", 0.45), ('desk "A" \\ 1', 0.45)]
-    assert hints_file.read_text().startswith(r"# the target is on a desk or shelf of store\n[[hint]]\nweight = 1.0\x01: ")
+    assert hints_file.read_text().startswith("# the target is on a desk or shelf of store\n# [[hint]]\n"
+                                             "# weight = 1.0\\x01: ")  # each of the name's lines a comment
 
 
 def test_the_harness_accepts_the_priors_that_need_no_knowledge():
