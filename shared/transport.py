@@ -62,7 +62,8 @@ class TransportConfig:
             try:
                 config = zenoh.Config.from_file(str(self.zenoh_config))
             except zenoh.ZError as exc:  # Zenoh's message points at a line, not at the file
-                raise ConfigError("--zenoh-config", str(self.zenoh_config), f"not a Zenoh configuration: {exc}") from None
+                raise ConfigError("--zenoh-config", str(self.zenoh_config),  # the value shown may be cut short
+                                  f"{self.zenoh_config} is not a Zenoh configuration: {exc}") from None
         else:
             config = zenoh.Config()
         for key, value in {**self._flag_settings(config), **self.extra}.items():
