@@ -224,6 +224,15 @@ def _wait_for_actions(out: Path, actions: int, process: subprocess.Popen, timeou
     raise AssertionError(f"no checkpoint with {actions} actions after {timeout_s} s")
 
 
+def _started_search(endpoint: str, picture: Path, out: Path, stderr=subprocess.DEVNULL) -> subprocess.Popen:
+    """A search for paper-lab's target (pictured on four sides) by the agent at ``endpoint``, in a
+    process of its own."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "offboard.cli", "search", "--connect", endpoint, "--no-multicast-scouting",
+         "--target-picture", str(picture), "--target-sides", "4", "--room", "9,5,2.5", "--out", str(out)],
+        stdout=subprocess.DEVNULL, stderr=stderr, text=True)
+
+
 @pytest.mark.long
 @pytest.mark.integration
 def test_a_search_killed_mid_way_resumes_from_its_checkpoint_and_finds_the_target(tmp_path):
@@ -231,10 +240,7 @@ def test_a_search_killed_mid_way_resumes_from_its_checkpoint_and_finds_the_targe
     with onboard_agent(["--backend", "sim", "--world", "paper-lab", "--start", START], tmp_path / "onboard.log") as agent:
         with TransportConfig(connect=(agent.endpoint,), multicast_scouting=False).open() as session:
             agent.wait_ready(session, "syt")
-            search = subprocess.Popen(
-                [sys.executable, "-m", "offboard.cli", "search", "--connect", agent.endpoint, "--no-multicast-scouting",
-                 "--target-picture", str(picture), "--target-sides", "4", "--room", "9,5,2.5", "--out", str(out)],
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            search = _started_search(agent.endpoint, picture, out)
             try:
                 _wait_for_actions(out, 2, search, timeout_s=60)
                 search.send_signal(signal.SIGKILL)
@@ -273,10 +279,7 @@ def test_a_robot_lost_mid_search_ends_it_with_one_error_and_keeps_its_checkpoint
     with onboard_agent(["--backend", "sim", "--world", "paper-lab", "--start", START], tmp_path / "onboard.log") as agent:
         with TransportConfig(connect=(agent.endpoint,), multicast_scouting=False).open() as session:
             agent.wait_ready(session, "syt")
-        search = subprocess.Popen(
-            [sys.executable, "-m", "offboard.cli", "search", "--connect", agent.endpoint, "--no-multicast-scouting",
-             "--target-picture", str(picture), "--target-sides", "4", "--room", "9,5,2.5", "--out", str(out)],
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        search = _started_search(agent.endpoint, picture, out, stderr=subprocess.PIPE)
         try:
             _wait_for_actions(out, 2, search, timeout_s=60)
             agent.process.kill()
