@@ -91,6 +91,7 @@ class Comparison:
     latency: tuple[PairedLatency, ...]
     only_base: int  # runs in one sweep only: not compared
     only_new: int
+    yardstick_changed: int = 0  # paired runs whose shortest path (SPL's l) differs: SPL measured otherwise
 
 
 def load_sweep(folder: Path) -> list[dict]:
@@ -117,8 +118,9 @@ def compare(base_rows: list[dict], new_rows: list[dict], base: str = "base", new
         timed = _paired_latency(variant, both)
         if timed:
             latency.append(timed)
+    yardstick = sum(base_runs[k]["shortest_path_m"] != new_runs[k]["shortest_path_m"] for k in common)
     return Comparison(base, new, tuple(groups), tuple(latency), len(base_runs) - len(common),
-                      len(new_runs) - len(common))
+                      len(new_runs) - len(common), yardstick)
 
 
 def _world_name(world: str) -> str:
@@ -177,6 +179,7 @@ def _paired_latency(variant: str, pairs: list[tuple[dict, dict]]) -> PairedLaten
 def comparison_json(c: Comparison) -> dict:
     """The comparison as one JSON object (differences included, so a tool need not recompute them)."""
     return {"base": c.base, "new": c.new, "only_base": c.only_base, "only_new": c.only_new,
+            "yardstick_changed": c.yardstick_changed,
             "groups": [{**asdict(g), "spl_difference": g.spl_difference} for g in c.groups],
             "latency": [asdict(t) for t in c.latency]}
 
@@ -231,4 +234,8 @@ def comparison_md(c: Comparison) -> str:
                       f"again with the same --out to redo them): {crashed}."]
     if c.only_base or c.only_new:
         lines += ["", f"Not compared: {c.only_base} runs only in base, {c.only_new} only in new."]
+    if c.yardstick_changed:
+        lines += ["", f"**{c.yardstick_changed} paired runs have another shortest path in new**: SPL's yardstick "
+                      "changed between the sweeps (the code that measures it, or the worlds), so their SPL "
+                      "difference is not the search's alone."]
     return "\n".join(lines) + "\n"

@@ -178,3 +178,16 @@ def test_the_command_names_a_folder_without_results_and_sweeps_with_nothing_in_c
     other = _write(tmp_path / "other", BASE, method="frontier")
     assert main(["compare", str(base), str(other)]) == 2
     assert "no run in common" in caplog.text
+
+
+def test_pairs_measured_against_another_shortest_path_are_counted_and_said(tmp_path):
+    """A change to how SPL's shortest path is measured showed as runs the search had changed."""
+    from offboard.experiments.comparison import comparison_md
+
+    base = load_sweep(_write(tmp_path / "base", BASE))
+    assert compare(base, load_sweep(_write(tmp_path / "same", BASE))).yardstick_changed == 0
+    new = load_sweep(_write(tmp_path / "new", BASE))
+    new[0]["shortest_path_m"] = 0.7
+    result = compare(base, new)
+    assert result.yardstick_changed == 1
+    assert "**1 paired runs have another shortest path in new**" in comparison_md(result)
