@@ -29,7 +29,7 @@ from shared import toml_writer
 from shared.geometry import HeadMount
 from shared.limits import PanTiltLimits
 from shared.strict import bounds
-from shared.world import Box, is_bundled_room, load_world, resolve_world, support_of
+from shared.world import Box, WorldError, is_bundled_room, load_world, resolve_world, support_of
 
 Vec3 = tuple[float, float, float]
 Start = tuple[float, float, float]  # x, y, heading° (the agent's --start)
@@ -263,14 +263,18 @@ class WorldFacts:
 
     def picture_file(self, folder: Path) -> Path:
         """The target's picture as a file the planner can read: the world's own image, else the
-        simulator's built-in picture of that name, written into ``folder``."""
+        simulator's built-in picture of that name, written into ``folder``; :class:`WorldError` with the
+        simulator's reason if it cannot draw one."""
         own = self.path.parent / self.target_picture
         if own.is_file():
             return own
         folder.mkdir(parents=True, exist_ok=True)
         out = folder / f"{Path(self.target_picture).stem}.png"  # named as built: two worlds' may share a name
-        subprocess.run([sys.executable, "-m", "onboard.cli", "picture", Path(self.target_picture).stem,
-                        "--out", str(out)], check=True, capture_output=True)
+        done = subprocess.run([sys.executable, "-m", "onboard.cli", "picture", Path(self.target_picture).stem,
+                               "--out", str(out)], capture_output=True, text=True)
+        if done.returncode != 0:
+            said = done.stderr.strip().splitlines() or [f"exit {done.returncode}"]
+            raise WorldError(f"its target picture: {said[-1].split(' ERROR ', 1)[-1]}")
         return out
 
     def knowledge_surfaces(self) -> tuple[Box, ...]:
