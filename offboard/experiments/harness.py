@@ -49,8 +49,8 @@ import numpy as np
 from offboard.experiments.baselines import BASELINES, BaselineContext
 from offboard.experiments.calibration import LOOKS_FILE
 from offboard.experiments.report import append_row, finished_keys, write_report
-from offboard.experiments.world_facts import (Placement, Start, WorldFacts, load_facts, robot_starts, tables_hints,
-                                       target_placements, viewpoint)
+from offboard.experiments.world_facts import (Placement, Start, WorldFacts, load_facts, robot_starts, simulator_refuses,
+                                              tables_hints, target_placements, viewpoint)
 from offboard.search.loop import Search, SearchConfig
 from shared.arguments import floats, probability
 from shared.config import load_config
@@ -395,12 +395,9 @@ def _prepare(runs: list[Run], out: Path) -> dict[str, tuple[WorldFacts, Path, Pa
 def _check_worlds(paths: list[str]) -> None:
     """The simulator's own check of the worlds (``syt-onboard worlds check``), in its process: this
     side never imports the simulator."""
-    done = subprocess.run([sys.executable, "-m", "onboard.cli", "worlds", "check", *paths],
-                          capture_output=True, text=True)
-    if done.returncode != 0:
-        problems = [line.split(": ", 1)[-1] for line in done.stderr.splitlines() if " ERROR " in line]
-        raise SweepRefused("the simulator cannot run "
-                           + ("; ".join(problems) or done.stderr.strip() or f"exit {done.returncode}"))
+    refused = simulator_refuses("worlds", "check", *paths)
+    if refused:
+        raise SweepRefused(f"the simulator cannot run {refused}")
 
 
 # what a run writes into its folder (:func:`offboard.search.run.run_search`), removed before each attempt so

@@ -39,6 +39,20 @@ DRIVE_CLEARANCE_M = 0.31  # what the navigator keeps from obstacles: the robot's
 ARRIVAL_MARGIN_M = 0.25  # how far from where it was sent a robot may stop (the oracle's "arrived")
 
 
+# --- the simulator's command line -------------------------------------------------------------------
+
+def simulator_refuses(*args: str) -> str:
+    """Run the simulator's command line (``syt-onboard ARGS``) in its own process, since this side never
+    imports the simulator: "" if it succeeded, else the reasons it logged as errors ("; " between them),
+    or its exit status if it logged none."""
+    done = subprocess.run([sys.executable, "-m", "onboard.cli", *args], capture_output=True, text=True)
+    if done.returncode == 0:
+        return ""
+    reasons = [line.split(" ERROR ", 1)[1].split(": ", 1)[-1] for line in done.stderr.splitlines()
+               if " ERROR " in line]
+    return "; ".join(reasons) or done.stderr.strip() or f"exit {done.returncode}"
+
+
 # --- the truth -------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -270,11 +284,9 @@ class WorldFacts:
             return own
         folder.mkdir(parents=True, exist_ok=True)
         out = folder / f"{Path(self.target_picture).stem}.png"  # named as built: two worlds' may share a name
-        done = subprocess.run([sys.executable, "-m", "onboard.cli", "picture", Path(self.target_picture).stem,
-                               "--out", str(out)], capture_output=True, text=True)
-        if done.returncode != 0:
-            said = done.stderr.strip().splitlines() or [f"exit {done.returncode}"]
-            raise WorldError(f"its target picture: {said[-1].split(' ERROR ', 1)[-1]}")
+        refused = simulator_refuses("picture", Path(self.target_picture).stem, "--out", str(out))
+        if refused:
+            raise WorldError(f"its target picture: {refused}")
         return out
 
     def knowledge_surfaces(self) -> tuple[Box, ...]:

@@ -274,7 +274,7 @@ def test_every_prior_kind_is_accepted():
 @pytest.mark.parametrize("world, problem", [
     ("no-such-world", "no such world file and no bundled world of that name"),
     ("nan.toml", "must be finite"),
-    ("nopic.toml", "its target picture: syt.onboard: unknown picture 'nope'"),
+    ("nopic.toml", "its target picture: unknown picture 'nope'"),
 ])
 def test_the_demo_names_a_broken_world_without_a_traceback(tmp_path, caplog, world, problem):
     """Each was a traceback: only bad configuration values were caught, not a world's."""
