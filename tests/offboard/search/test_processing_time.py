@@ -14,12 +14,13 @@ from offboard.planning.planner import Decision
 
 pytestmark = pytest.mark.integration
 
-PRIOR_S = 1.0  # a dynamic prior's update that takes this long (saliency's takes about 0.15 s): long beside
-# the 0.1-0.2 s that one look's own processing varies by on a loaded machine (at 0.5 s, CI once saw 0.37)
+PRIOR_S = 1.0  # a dynamic prior's update that takes this long (saliency's takes about 0.15 s): longer than a
+# look's own processing (0.3-0.7 s here), so a look that counts it cannot be told from one that does not by
+# chance; a difference between two looks could (0.77 s on a loaded CI machine, where one look was slower)
 
 
 def test_a_look_s_processing_counts_the_dynamic_priors_update(sim_agent):
-    slow_from_look = 3  # the first look warms the caches up, the second is the one to compare with
+    slow_from_look = 3  # the first two looks warm the caches up
 
     def prior(obs, search) -> None:  # a factor of None leaves the belief as it is
         if search.state.actions >= slow_from_look:
@@ -30,7 +31,7 @@ def test_a_look_s_processing_counts_the_dynamic_priors_update(sim_agent):
         search._look(Decision("look", "level", azimuth_rad=math.radians(azimuth_deg), tilt_rad=0.0, setting=setting))
     looks = [look["processing_s"] for look in search.state.look_log]
     assert sum(looks) == pytest.approx(search.state.processing_s, abs=1e-3)
-    assert looks[2] - looks[1] >= 0.8 * PRIOR_S, looks
+    assert looks[1] < PRIOR_S <= looks[2], looks
 
 
 def test_the_planning_of_the_decision_to_stop_is_counted(sim_agent):
