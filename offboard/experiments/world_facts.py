@@ -112,7 +112,11 @@ class SeeingCriteria:
     obstacle crosses the lines from the camera to the picture's centre and corners. The range, the nearest distance
     and the widest angle off the normal follow from the table (:attr:`range_m`, :attr:`near_m`,
     :attr:`max_off_normal_deg`). The table is for the face size it was measured with;
-    :func:`seeing_cells` rescales it to the target's (direct callers of :meth:`rate` must too)."""
+    :func:`seeing_cells` rescales it to the target's (direct callers of :meth:`rate` must too).
+
+    The camera stands on the head's axis, where the shipped tables were measured from; the planner's
+    left camera sits half the stereo baseline (6 cm) aside. A review (session 53) found that offset
+    changes 0-3 % of the seeing (cell, face) pairs of three targets each in `office` and `paper-lab`."""
 
     table: DetectabilityTable = field(default_factory=detector_table, compare=False)
     min_rate: float = field(default=0.8, metadata=bounds(0.0, 1.0))  # "the detector reliably finds it"
