@@ -56,6 +56,9 @@ class OccupancyConfig:
         if not (order[0] <= order[1] < order[2] <= order[3]):  # else a wall is never occupied, or always free
             raise ValueError(f"occupancy needs clamp_min <= free_log_odds < occupied_log_odds <= clamp_max, "
                              f"not {' / '.join(map(str, order))}")
+        if not (self.free_log_odds < 0 < self.occupied_log_odds):  # at 0, unobserved space stops every ray
+            raise ValueError(f"occupancy needs free_log_odds < 0 < occupied_log_odds (0: no evidence either way), "
+                             f"not {self.free_log_odds} / {self.occupied_log_odds}")
 
 
 @dataclass(frozen=True)
@@ -119,11 +122,10 @@ class OccupancyGrid:
                   baseline_m: float, camera_in_world: RigidTransform) -> int:
         """Fold one frame's stereo points into the grid (eq. 6-8); return the number of cubes updated."""
         k, c = intrinsics, self.config
-        if not (baseline_m > 0 and k.fx_px > 0 and k.fy_px > 0):  # else points land behind the camera
-            raise ValueError(f"stereo needs a positive baseline and focal length, not {baseline_m} m and "
-                             f"{k.fx_px}/{k.fy_px} px")
+        _check_stereo(k, baseline_m, camera_in_world)
         u, v, d = (np.ascontiguousarray(a, np.float64) for a in (u_px, v_px, d_px))
-        keep = (d > 0) & (k.fx_px * baseline_m / np.maximum(d, 1e-6) <= c.max_range_m)
+        # an infinite disparity is depth 0 (eq. 6): it would mark the camera's own cube occupied
+        keep = np.isfinite(d) & (d > 0) & (k.fx_px * baseline_m / np.maximum(d, 1e-6) <= c.max_range_m)
         camera = np.array([k.fx_px, k.fy_px, k.cx_px, k.cy_px, baseline_m])
         # the frame's pose in cube units: p_cube = (R p_cam + t - origin) / resolution
         rotation = camera_in_world.rotation / self.grid.resolution_m
@@ -185,15 +187,8 @@ class OccupancyGrid:
     def cast_rays(self, origins_m: np.ndarray, directions: np.ndarray, max_range_m: float) -> RayHits:
         """Walk each ray to the first occupied cube (or the room's boundary, or ``max_range_m``);
         unknown space does not stop it (the expected sensed spheres' optimistic choice)."""
-        origins, dirs = np.atleast_2d(origins_m).astype(np.float64), np.atleast_2d(directions).astype(np.float64)
-        paired = len(origins) == len(dirs) or 1 in (len(origins), len(dirs))  # else numpy broadcasting fails
-        if origins.shape[1:] != (3,) or dirs.shape[1:] != (3,) or not paired:
-            raise ValueError(f"rays need one origin or one per direction, each a 3-vector: got origins "
-                             f"{origins.shape} and directions {dirs.shape}")  # the kernel checks no bounds
-        norms = np.linalg.norm(dirs, axis=1, keepdims=True)
-        if not np.all(norms > 0):
-            raise ValueError("a ray's direction must not be the zero vector")
-        origins, dirs = np.broadcast_arrays((origins - self.grid.origin) / self.grid.resolution_m, dirs / norms)
+        origins, dirs = _checked_rays(origins_m, directions, max_range_m)
+        origins, dirs = np.broadcast_arrays((origins - self.grid.origin) / self.grid.resolution_m, dirs)
         dist, hit = _cast_rays(self._log_odds, np.ascontiguousarray(origins), np.ascontiguousarray(dirs),
                                max_range_m / self.grid.resolution_m,
                                self.config.occupied_log_odds)
@@ -241,6 +236,35 @@ class OccupancyGrid:
         inside = tuple(slice(radius_cells, radius_cells + n) for n in occupied.shape)
         blocked = cv2.dilate(padded.astype(np.uint8), disc)[inside]
         return FloorMap(res, occupied, blocked.astype(bool), unknown)
+
+
+def _check_stereo(k: Intrinsics, baseline_m: float, camera_in_world: RigidTransform) -> None:
+    """A frame the kernel can place: in front of the camera (z = f·B/d, eq. 6), from a finite pose."""
+    if not (baseline_m > 0 and k.fx_px > 0 and k.fy_px > 0):  # else points land behind the camera
+        raise ValueError(f"stereo needs a positive baseline and focal length, not {baseline_m} m and "
+                         f"{k.fx_px}/{k.fy_px} px")
+    for name in ("rotation", "translation"):  # NaN dropped the frame or updated stray cubes, unsaid
+        value = np.asarray(getattr(camera_in_world, name))
+        if not np.isfinite(value).all():
+            raise ValueError(f"a frame needs a finite camera pose, not {name} {value.tolist()}")
+
+
+def _checked_rays(origins_m: np.ndarray, directions: np.ndarray, max_range_m: float) -> tuple[np.ndarray, ...]:
+    """The origins (n, 3) and unit directions (n, 3), or 1 for n, of rays that the kernel can walk."""
+    origins, dirs = np.atleast_2d(origins_m).astype(np.float64), np.atleast_2d(directions).astype(np.float64)
+    paired = len(origins) == len(dirs) or 1 in (len(origins), len(dirs))  # else numpy broadcasting fails
+    if origins.shape[1:] != (3,) or dirs.shape[1:] != (3,) or not paired:
+        raise ValueError(f"rays need one origin or one per direction, each a 3-vector: got origins "
+                         f"{origins.shape} and directions {dirs.shape}")  # the kernel checks no bounds
+    for name, value in (("origins", origins), ("directions", dirs)):  # a NaN origin hit at 0 m, unsaid
+        if not np.isfinite(value).all():
+            raise ValueError(f"rays need finite {name}, not {value[~np.isfinite(value).all(axis=1)][0].tolist()}")
+    if not (math.isfinite(max_range_m) and max_range_m > 0):  # else a negative or NaN distance
+        raise ValueError(f"rays need a finite, positive max range, not {max_range_m} m")
+    norms = np.linalg.norm(dirs, axis=1, keepdims=True)
+    if not np.all(norms > 0):
+        raise ValueError("a ray's direction must not be the zero vector")
+    return origins, dirs / norms
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:

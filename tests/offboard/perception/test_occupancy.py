@@ -1,5 +1,6 @@
 """The occupancy grid (eq. 5-8) on frames whose answer is known."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -46,7 +47,62 @@ def test_eq7_a_far_point_weighs_less_per_cube_than_a_near_one():
         occ.integrate_disparity(one_point, K, MOUNT.baseline_m, _facing_east())
     assert near.log_odds.max() > far.log_odds.max() > 0
     assert (far.log_odds > 0).sum() > (near.log_odds > 0).sum()  # |C| grows with distance
-    assert far.log_odds[far.log_odds > 0].sum() == pytest.approx(1.0, rel=0.3)  # 1/|C| over C
+    assert far.log_odds[far.log_odds > 0].sum() == pytest.approx(1.0, abs=1e-5)  # 1/|C| over C
+
+
+def test_eq6_a_point_covers_its_whole_pixel():
+    """With coarse pixels a pixel is wider than a cube: the region spans its footprint, z/f wide."""
+    coarse = Intrinsics.from_fov(16, 12, 66.0)
+    occ, depth_m, baseline_m = OccupancyGrid(ROOM), 2.0, 1.0
+    occ.integrate(np.array([8.0]), np.array([6.0]), np.array([coarse.fx_px * baseline_m / depth_m]), coarse,
+                  baseline_m, _facing_east())
+    cubes = np.argwhere(occ.log_odds > 0)
+    width_m = (cubes.max(axis=0) - cubes.min(axis=0) + 1) * ROOM.resolution_m
+    assert width_m[1] >= depth_m / coarse.fx_px and width_m[2] >= depth_m / coarse.fy_px  # across, up
+
+
+def test_a_strided_pixel_lands_where_its_ray_points():
+    """Each sampled pixel is at (u, v) = (s·a + s/2, s·b + s/2): without the s/2 it landed 13 cm off."""
+    occ = OccupancyGrid(ROOM, OccupancyConfig(point_stride_px=32))
+    cam, depth_m = _facing_east(), 4.0
+    one_point = np.full((K.height_px, K.width_px), np.nan, np.float32)
+    one_point[240, 336] = K.fx_px * MOUNT.baseline_m / depth_m  # sampled: 240 = 32·7 + 16, 336 = 32·10 + 16
+    occ.integrate_disparity(one_point, K, MOUNT.baseline_m, cam)
+    truth = ROOM.index_of(cam.apply(K.back_project(336.0, 240.0, depth_m)))
+    cubes = np.argwhere(occ.log_odds > 0)
+    assert occ.log_odds[tuple(truth)] > 0 and (np.abs(cubes[:, 1:] - truth[1:]) <= 1).all()
+
+
+def test_stereo_beyond_max_range_is_ignored():
+    occ = OccupancyGrid(ROOM, OccupancyConfig(max_range_m=4.0))
+    assert occ.integrate_disparity(_wall_disparity(4.5), K, MOUNT.baseline_m, _facing_east()) == 0
+    assert not occ.observed.any()
+    assert occ.integrate_disparity(_wall_disparity(3.5), K, MOUNT.baseline_m, _facing_east()) > 0
+
+
+def test_an_infinite_disparity_is_dropped_not_put_on_the_camera():
+    """Depth f·B/d is 0 at d = inf: the camera's own cube came out occupied."""
+    occ, cam = OccupancyGrid(ROOM), _facing_east()
+    occ.integrate(np.array([320.0, 320.0]), np.array([240.0, 240.0]), np.array([np.inf, 20.0]), K,
+                  MOUNT.baseline_m, cam)
+    assert occ.log_odds[tuple(ROOM.index_of(cam.translation))] < 0  # free: the finite point's ray starts there
+    assert (occ.log_odds > 0).any()
+
+
+@pytest.mark.parametrize("part", ["rotation", "translation"])
+def test_a_frame_from_a_non_finite_pose_is_refused(part):
+    """A NaN rotation updated a stray cube; a NaN translation dropped the frame; neither said so."""
+    cam = _facing_east()
+    lost = dataclasses.replace(cam, **{part: getattr(cam, part) * np.nan})
+    with pytest.raises(ValueError, match=f"finite camera pose, not {part}"):
+        OccupancyGrid(ROOM).integrate_disparity(_wall_disparity(3.0), K, MOUNT.baseline_m, lost)
+
+
+def test_log_odds_stop_at_the_clamps():
+    occ = OccupancyGrid(ROOM)
+    for _ in range(6):  # +1 a frame on the wall, -0.4 before it: past both clamps (a changed world is re-learnt)
+        occ.integrate_disparity(_wall_disparity(3.0), K, MOUNT.baseline_m, _facing_east())
+    assert occ.log_odds.max() == occ.config.clamp_max and occ.log_odds.min() == occ.config.clamp_min
 
 
 def test_each_cube_is_updated_once_per_frame():
@@ -94,6 +150,20 @@ def test_rays_from_many_origins_each_follow_their_own_direction_or_are_refused()
         occ.cast_rays(origins[0], np.zeros(3), 10.0)
 
 
+@pytest.mark.parametrize("origin, direction, max_range_m, bad", [
+    ((np.nan, 2.0, 1.2), (1.0, 0.0, 0.0), 5.0, "finite origins"),  # was a hit at 0 m
+    ((1.0, 2.0, 1.2), (np.inf, 0.0, 0.0), 5.0, "finite directions"),  # ran to max range, no hit
+    ((1.0, 2.0, 1.2), (np.nan, 0.0, 0.0), 5.0, "finite directions"),  # was called the zero vector
+    ((1.0, 2.0, 1.2), (1.0, 0.0, 0.0), -1.0, "finite, positive max range"),  # distance -1 m
+    ((1.0, 2.0, 1.2), (1.0, 0.0, 0.0), 0.0, "finite, positive max range"),
+    ((1.0, 2.0, 1.2), (1.0, 0.0, 0.0), np.nan, "finite, positive max range"),  # distance NaN
+    ((1.0, 2.0, 1.2), (1.0, 0.0, 0.0), np.inf, "finite, positive max range"),
+])
+def test_rays_with_non_finite_input_are_refused(origin, direction, max_range_m, bad):
+    with pytest.raises(ValueError, match=bad):
+        OccupancyGrid(ROOM).cast_rays(np.array(origin), np.array(direction), max_range_m)
+
+
 @pytest.mark.parametrize("baseline_m", [0.0, -0.12])
 def test_a_frame_without_a_positive_baseline_is_refused(baseline_m):
     """At 0 every point fell on the camera's own cube; negative, stereo carved free space behind it."""
@@ -107,6 +177,39 @@ def test_thresholds_the_clamps_make_unreachable_are_refused(changes):
     """A clamp under the occupied threshold left a wall seen twenty times unoccupied."""
     with pytest.raises(ValueError, match="clamp_min <= free_log_odds < occupied_log_odds <= clamp_max"):
         OccupancyConfig(**changes)
+
+
+@pytest.mark.parametrize("changes", [{"occupied_log_odds": 0.0}, {"free_log_odds": 0.0}])
+def test_thresholds_that_do_not_straddle_no_evidence_are_refused(changes):
+    """Occupied at 0, every unobserved cube was: each ray stopped at 0 m, the floor map was all blocked."""
+    with pytest.raises(ValueError, match="free_log_odds < 0 < occupied_log_odds"):
+        OccupancyConfig(**changes)
+
+
+def _scene(*occupied_cubes) -> OccupancyGrid:
+    """Every cube observed and free but ``occupied_cubes``, each an (i, j, k)."""
+    occ = OccupancyGrid(ROOM)
+    with occ.edit() as (log_odds, observed):
+        observed[:] = True
+        log_odds[:] = -1.0
+        for cube in occupied_cubes:
+            log_odds[cube] = 2.0
+    return occ
+
+
+def test_floor_map_ignores_noise_under_the_clearance_and_overhangs_over_the_robot():
+    low, high = (60, 20, 2), (60, 60, 26)  # the band's ends: 10-15 cm and 1.30-1.35 m
+    noise, overhang = (30, 40, 1), (90, 40, 27)  # 5-10 cm, 1.35-1.40 m
+    fm = _scene(low, high, noise, overhang).floor_map(robot_radius_m=0.1, robot_height_m=1.35,
+                                                      floor_clearance_m=0.1)
+    assert fm.blocked[60, 20] and fm.blocked[60, 60]
+    assert not fm.blocked[30, 40] and not fm.blocked[90, 40]
+
+
+def test_floor_map_rounds_the_robot_radius_up():
+    """0.12 m is 2.4 cubes: the base keeps 3 cubes off an obstacle, never less than its radius."""
+    fm = _scene((60, 40, 10)).floor_map(robot_radius_m=0.12, robot_height_m=1.35)
+    assert fm.blocked[63, 40] and fm.blocked[60, 37] and not fm.blocked[64, 40]
 
 
 def test_a_robot_of_no_radius_blocks_what_is_occupied_and_the_walls_add_nothing():
@@ -201,7 +304,7 @@ def test_seen_empty_keeps_a_margin_around_surfaces_unknown_space_and_the_room():
     assert plain[i_wall - 3, j, k] and not kept[i_wall - 3, j, k]  # next to the wall: kept
     assert kept[i_wall - 10, j, k]  # open air in front of it: empty
     assert not kept[:, :, :3].any() and not kept[:3].any()  # the floor, the room's boundary
-    assert not (kept & ~plain).any()  # a margin only ever keeps more
+    assert kept[i_wall - 4, j, k]  # the margin is three cubes: the fourth out is empty
     with occ.edit() as (_, observed):
         observed[i_wall - 10, j + 2, k] = False  # unknown space two cubes beside it: kept
     assert not occ.seen_empty(-0.8, margin_cubes=3)[i_wall - 10, j, k]
