@@ -218,21 +218,23 @@ def _calibrate(args: argparse.Namespace) -> int:
     from offboard.perception.detection.detector import make_detector
     from offboard.perception.detection.target_model import TargetModel
     from offboard.robot.robot_client import RobotClient
+    from shared.geometry import HeadMount
     from shared.launch import onboard_agent
 
     model = TargetModel.from_files(args.target_picture, args.target_size)
     grid = calibration.CalibrationGrid(samples=args.samples, negatives=args.negatives)
+    head_m = HeadMount().height_m  # the agent below runs the default head: the face sits at its cameras' height
     with tempfile.TemporaryDirectory() as tmp:
         world = Path(tmp) / "calibration.toml"
         shutil.copy(args.target_picture[0], Path(tmp) / "target.png")
-        world.write_text(calibration.calibration_world("target.png", args.target_size, 1.2))
+        world.write_text(calibration.calibration_world("target.png", args.target_size, head_m))
         with onboard_agent(["--backend", "sim", "--world", str(world)], Path(tmp) / "onboard.log") as agent:
             transport = TransportConfig(robot_id="syt", connect=(agent.endpoint,), multicast_scouting=False)
             with transport.open() as session, RobotClient(session, "syt") as robot:
                 agent.wait_ready(session, "syt")
                 info = robot.wait_for_robot()
                 detector = make_detector(args.detector, model, info.intrinsics.to_intrinsics())
-                face = calibration.face_centre(args.target_size, info.mount.height_m)
+                face = calibration.face_centre(args.target_size, head_m)
                 tally = calibration.calibrate(robot, detector, grid, face, args.target_size[1], _progress)
     table = calibration.to_table(args.detector, grid, tally, model.face_size_m)
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -5,10 +5,12 @@ from __future__ import annotations
 import json
 import shutil
 
+import cv2
 import numpy as np
 import pytest
 
 from offboard.cli import main
+from offboard.perception import rendered_views
 from offboard.perception.rendered_views import count_pixels, score_views
 from offboard.perception.stereo import StereoConfig
 from onboard.sim.stereo_views import View, write_view_set
@@ -36,6 +38,30 @@ def test_pixels_are_counted_against_the_truth():
     assert counts.phantom == 2  # 14 at 10 and 8 at 3; 13 at 10 is 3 px off but under 4/3 of it
     assert counts.phantom_view  # 2 of 6 pixels
     assert not count_pixels(np.array([10.5, 13.0]), np.array([10.0, 10.0])).phantom_view
+
+
+def test_the_matcher_gets_each_view_in_rgb_order(tmp_path, monkeypatch):
+    rgb = np.zeros((4, 6, 3), np.uint8)
+    rgb[..., 0] = 200  # red: a PNG file holds it first, OpenCV reads it last
+    (tmp_path / "view").mkdir()
+    for name in ("left.png", "right.png"):
+        cv2.imwrite(str(tmp_path / "view" / name), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    np.save(tmp_path / "view" / "depth.npy", np.ones((4, 6), np.float32))
+    (tmp_path / "views.json").write_text(json.dumps({"fx_px": 500.0, "baseline_m": 0.12,
+                                                     "views": [{"world": "w", "folder": "view"}]}))
+    seen = []
+
+    class Recording:
+        def __init__(self, config):
+            pass
+
+        def disparity(self, left, right):
+            seen.extend([left, right])
+            return np.full(left.shape[:2], np.nan)
+
+    monkeypatch.setattr(rendered_views, "StereoMatcher", Recording)
+    score_views(tmp_path, {"default": DEFAULT})
+    assert len(seen) == 2 and all(np.array_equal(image, rgb) for image in seen)
 
 
 def test_sad_builds_a_phantom_wall_and_the_default_does_not(views):
