@@ -35,14 +35,24 @@ def motorcycle() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return left, right, truth
 
 
-def score(disparity: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
-    """(bad2, density) of a disparity map (NaN = no answer) against ground truth (NaN = unknown)."""
+def answered_errors(disparity: np.ndarray, truth: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+    """A disparity map (NaN = no answer) against the truth (NaN or inf = unknown): how many pixels
+    have a known truth, the mask of those the map answered, and its errors there (map − truth)."""
     known = np.isfinite(truth)
     answered = known & np.isfinite(disparity)
-    if not answered.any():
-        return 1.0, 0.0
-    bad = np.abs(disparity[answered] - truth[answered]) > BAD_THRESHOLD_PX
-    return float(bad.mean()), float(answered.sum() / known.sum())
+    return int(known.sum()), answered, disparity[answered] - truth[answered]
+
+
+def bad2_and_density(bad: int, answered: int, known: int) -> tuple[float, float]:
+    """The share of answered pixels off by more than ``BAD_THRESHOLD_PX``, and the share of known ones
+    answered; (1, 0) when nothing is answered: a blind matcher scores no better than a wrong one."""
+    return (1.0, 0.0) if answered == 0 else (bad / answered, answered / known)
+
+
+def score(disparity: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    """(bad2, density) of one disparity map against its ground truth."""
+    known, answered, error = answered_errors(disparity, truth)
+    return bad2_and_density(int((np.abs(error) > BAD_THRESHOLD_PX).sum()), int(answered.sum()), known)
 
 
 def evaluate_motorcycle(config: StereoConfig | None = None) -> dict:

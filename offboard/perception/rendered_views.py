@@ -23,7 +23,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from offboard.perception.middlebury import BAD_THRESHOLD_PX
+from offboard.perception.middlebury import BAD_THRESHOLD_PX, answered_errors, bad2_and_density
 from offboard.perception.stereo import StereoConfig, StereoMatcher
 
 PHANTOM_RATIO = 4.0 / 3.0  # a disparity this many times the truth: depth under 3/4 of the true depth
@@ -47,17 +47,15 @@ class PixelCounts:
 
 def count_pixels(disparity: np.ndarray, truth: np.ndarray) -> PixelCounts:
     """Compare a disparity map (NaN = no answer) with the true disparity (NaN or inf = unknown)."""
-    known = np.isfinite(truth)
-    ok = known & np.isfinite(disparity)
-    error = disparity[ok] - truth[ok]
+    known, ok, error = answered_errors(disparity, truth)
     too_near = (error > BAD_THRESHOLD_PX) & (disparity[ok] > PHANTOM_RATIO * truth[ok])
-    return PixelCounts(int(known.sum()), int(ok.sum()), int((np.abs(error) > BAD_THRESHOLD_PX).sum()),
+    return PixelCounts(known, int(ok.sum()), int((np.abs(error) > BAD_THRESHOLD_PX).sum()),
                        int(too_near.sum()), disparity.size)
 
 
 @dataclass(frozen=True)
 class ViewScores:
-    bad2: float  # 1 when nothing is answered: a blind matcher scores no better than a wrong one
+    bad2: float
     density: float
     phantom_share: float
     phantom_views: int
@@ -66,10 +64,9 @@ class ViewScores:
     @classmethod
     def of(cls, counts: list[PixelCounts]) -> ViewScores:
         answered = sum(c.answered for c in counts)
-        if answered == 0:
-            return cls(1.0, 0.0, 0.0, 0, len(counts))
-        return cls(sum(c.bad for c in counts) / answered, answered / max(sum(c.known for c in counts), 1),
-                   sum(c.phantom for c in counts) / answered, sum(c.phantom_view for c in counts), len(counts))
+        bad2, density = bad2_and_density(sum(c.bad for c in counts), answered, sum(c.known for c in counts))
+        return cls(bad2, density, sum(c.phantom for c in counts) / max(answered, 1),
+                   sum(c.phantom_view for c in counts), len(counts))
 
     def as_dict(self) -> dict:
         return {"bad2": round(self.bad2, 5), "density": round(self.density, 4),

@@ -11,7 +11,7 @@ import pytest
 
 from offboard.cli import main
 from offboard.perception import rendered_views
-from offboard.perception.rendered_views import count_pixels, score_views
+from offboard.perception.rendered_views import ViewScores, count_pixels, score_views
 from offboard.perception.stereo import StereoConfig
 from onboard.sim.stereo_views import View, write_view_set
 from shared.geometry import Pose2D
@@ -38,6 +38,15 @@ def test_pixels_are_counted_against_the_truth():
     assert counts.phantom == 2  # 14 at 10 and 8 at 3; 13 at 10 is 3 px off but under 4/3 of it
     assert counts.phantom_view  # 2 of 6 pixels
     assert not count_pixels(np.array([10.5, 13.0]), np.array([10.0, 10.0])).phantom_view
+
+
+def test_views_are_scored_over_their_pooled_pixels_and_a_blind_matcher_as_a_wrong_one():
+    truth = np.array([10.0, 10.0, 10.0, 10.0])
+    pooled = ViewScores.of([count_pixels(np.array([10.5, 13.0, np.nan, np.nan]), truth),
+                            count_pixels(np.array([10.0, 10.0, 10.0, np.nan]), truth)])
+    assert (pooled.bad2, pooled.density, pooled.views) == (pytest.approx(1 / 5), pytest.approx(5 / 8), 2)
+    blind = ViewScores.of([count_pixels(np.full(4, np.nan), truth)])
+    assert (blind.bad2, blind.density, blind.phantom_share) == (1.0, 0.0, 0.0)
 
 
 def test_the_matcher_gets_each_view_in_rgb_order(tmp_path, monkeypatch):
