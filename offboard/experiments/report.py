@@ -777,7 +777,8 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
     source = f"the SYT runs ({scope(syt)})"
     every_look = [look for run in looks for look in run]
     lines += calibration_md(calibration(every_look), source)
-    found_at = [int(r["actions"]) if r["success"] else None for r in syt]
+    # found, however well then placed: P[F] is the chance that the looks detect the target
+    found_at = [int(r["actions"]) if r["found"] else None for r in syt]
     lines += coverage_md(coverage(list(zip(looks, found_at))), source)
     lines += localisation_md(every_look, source)
     viewed, left_out = viewed_runs(syt, looks)

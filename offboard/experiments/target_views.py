@@ -5,7 +5,8 @@ find against what the exact update removed, both from the same table. This check
 at the one place that matters: for every look with the simulator's pose logged, the rate the table
 gives for the target's picture as that camera truly saw it, against whether the detector fired.
 
-A look has the picture *in view* when its centre and corners project into the image and no obstacle
+A look has the picture *in view* when its centre and its corners drawn in by a tenth
+(:meth:`~offboard.experiments.world_facts.Truth.picture_points`) project into the image and no obstacle
 crosses the lines to them; its *table rate* is then the table's at the picture's distance, its angle
 off the optical axis and the camera's angle off the picture's normal. Looks with a rate of at least
 0.05 are binned by it, each view of a run once (:func:`target_views`). Eq. 4 treats every look as a
@@ -52,8 +53,9 @@ class TargetView:
 def target_view(truth: Truth, look: Look, table: DetectabilityTable, mount: HeadMount = SIM_MOUNT,
                 intrinsics: Intrinsics = SIM_CAMERA) -> TargetView | None:
     """The view of the target's best pictured face (by table rate) from the look's true camera; None
-    if no face is all in the image and in plain sight, or for a look without the simulator's pose and
-    the head's angles. A face seen from behind is in view, at rate 0."""
+    if no face has its centre and inset corners (:meth:`Truth.picture_points`) in the image and in plain
+    sight, or for a look without the simulator's pose and the head's angles. A face seen from behind is
+    in view, at rate 0."""
     if not look.camera_known:
         return None
     x, y, heading = look.truth
@@ -197,7 +199,8 @@ def target_views_md(looks: list[ViewedLook], logged: int, repeated: int, source:
     lines = ["## The detector where the target was", "",
              f"Over {source}: {logged} looks logged the simulator's pose and the head's angles; in {len(looks)} of them the "
              f"target's picture was in view (the run's detector's table gives at least {RATE_EDGES[0]:g} from the true camera, "
-             "the picture all in the image, nothing in the way). Each view of a run counts once: "
+             "the picture's centre and its corners drawn in by a tenth in the image, nothing in the way). "
+             "Each view of a run counts once: "
              f"{repeated} more looks in view repeated one (the same pose and head angles, mostly to confirm a detection), "
              "which the simulator renders exactly again, so the detector answered as before. Binned by that table rate: "
              "the share of them on which the detector fired, for all of them and split at each run's first miss in view. "

@@ -374,13 +374,52 @@ def test_each_failed_run_is_put_down_to_a_cause_and_a_heading_error_counts_by_wh
     _row(results, "syt", "office", "uniform", 1, 60.0, 5.0, [right])  # a success: not listed
     write_report(results, tmp_path)
     text = (tmp_path / "report.md").read_text().split("## Failures")[1].split("\n## ")[0]
-    assert "| SYT cost 3, uniform | 2 | 1 | 1 | 0 | 0 |" in text and "| oracle, uniform | 2 | 2 | 0 | 1 | 1 |" in text
+    assert "| SYT cost 3, uniform | 2 | 1 | 1 | 0 | 0 | 0 |" in text
+    assert "| oracle, uniform | 2 | 2 | 0 | 1 | 1 | 0 |" in text
     rows = [line for line in text.splitlines() if line.startswith("| ") and "office" in line]
     assert len(rows) == 3
     [turned_row] = [r for r in rows if "localisation" in r]
     assert "| 0 | localisation | found |" in turned_row and turned_row.endswith("| 0.00 | 0.42 |")  # no position error
     assert any("| 1 | estimate | found |" in r and r.endswith("| 0.00 | 0.05 |") for r in rows)
     assert any("| not found | exhausted |" in r for r in rows)
+
+
+def test_a_run_found_without_a_logged_pose_is_not_put_down_to_its_estimate(tmp_path):
+    results = tmp_path / "results.csv"
+    x, y, z, _ = TARGETS["office"]
+    _row(results, "oracle", "office", "uniform", 0, 60.0, 5.0, [_look(0.5, 0.5, True)],  # no truth beside the pose
+         target_estimate_m=[x, y + 0.6, z])
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text().split("## Failures")[1].split("\n## ")[0]
+    assert "| Not found | Localisation | Estimate | Pose unchecked |" in text
+    assert "| oracle, uniform | 1 | 1 | 0 | 0 | 0 | 1 |" in text and "| pose unchecked | found |" in text
+
+
+def test_a_failed_run_with_a_malformed_target_is_named_and_the_rest_of_the_report_written(tmp_path):
+    results = tmp_path / "results.csv"
+    x, y, _, _ = TARGETS["office"]
+    seen = {**_look(0.5, 0.5, True), "x_m": x - 3.0, "y_m": y, "heading_deg": 0.0, "true_x_m": x - 3.0,
+            "true_y_m": y, "true_heading_deg": 0.0, "pan_deg": 0.0, "tilt_deg": 0.0}
+    row = _row(tmp_path / "scratch.csv", "syt", "office", "uniform", 0, 60.0, 5.0, [seen],
+               target_estimate_m=[x, y, 2.0])  # found, 1.2 m too high: a failure
+    append_row(results, {**row, "target": "1,2,3"})
+    write_report(results, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    failed = text.split("## Failures")[1].split("\n## ")[0]
+    assert "| 1,2,3 | 0 | pose unchecked | found |" in failed and failed.rstrip().endswith(
+        f"- {row['key']}: target '1,2,3' is not x,y,z,yaw")
+    assert "## Coverage" in text and f"- {row['key']}: target '1,2,3' is not x,y,z,yaw" in text.split(
+        "## The detector where the target was")[1]  # left out there by name too
+
+
+def test_coverage_counts_a_run_that_found_the_target_though_it_placed_it_too_far(tmp_path):
+    results = tmp_path / "results.csv"
+    x, y, z, _ = TARGETS["office"]
+    _row(results, "syt", "office", "uniform", 0, 60.0, 5.0, [_look(0.5, 0.5, True)])
+    _row(results, "syt", "office", "uniform", 1, 60.0, 5.0, [_look(0.5, 0.5, True)], target_estimate_m=[x, y + 0.6, z])
+    write_report(results, tmp_path)
+    coverage_section = (tmp_path / "report.md").read_text().split("## Coverage")[1].split("\n## ")[0]
+    assert "| 6 | 0 | — | 100% |" in coverage_section  # both found it at their sixth look
 
 
 def test_a_suites_worlds_are_named_by_the_suite():
