@@ -766,7 +766,8 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
               f"(report: {100 * REPORT_SUCCESS:.0f}%). "
               "SPL: success × shortest path / max(driven, shortest path), the shortest path being the collision-free "
               "path on the true floor map to the closest position from which the detector's measured table gives a "
-              "rate ≥ 0.8, with the camera aimed within its tilt limits and the whole picture in plain view."]
+              "rate ≥ 0.8, with the camera aimed within its tilt limits, the whole picture in the image and nothing "
+              "across the lines to its centre and its corners drawn in by a tenth."]
     unseen = any(r["shortest_path_m"] is None for r in rows)
     lines[-1] += _unseen_md(rows)
     lines += [""] + _stats_md(method_stats(rows), finite=unseen) + _errors_md(rows)

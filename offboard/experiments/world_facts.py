@@ -109,7 +109,8 @@ class SeeingCriteria:
     """When a floor position "sees" the target: with the camera aimed at the picture as well as the
     tilt limits allow, the detector's measured rate (by distance, angle off the optical axis and angle
     off the picture's normal) is at least ``min_rate``, the whole picture fits in the image, and no
-    obstacle crosses the lines from the camera to the picture's centre and corners. The range, the nearest distance
+    obstacle crosses the lines from the camera to the picture's centre and its corners drawn in by a tenth
+    (:meth:`Truth.picture_points`). The range, the nearest distance
     and the widest angle off the normal follow from the table (:attr:`range_m`, :attr:`near_m`,
     :attr:`max_off_normal_deg`). The table is for the face size it was measured with;
     :func:`seeing_cells` rescales it to the target's (direct callers of :meth:`rate` must too).
