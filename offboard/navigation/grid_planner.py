@@ -89,10 +89,11 @@ def path_length_m(path: list[Point] | None) -> float:
 # --- planning --------------------------------------------------------------------------------------
 
 def distance_field(floor_map: FloorMap, start_xy: Point) -> np.ndarray:
-    """Shortest 8-connected path length (m) from ``start_xy`` to every cell; ``inf`` if unreachable.
+    """Path length (m) from ``start_xy`` to every cell's centre; ``inf`` if unreachable.
 
-    If the start's cell is blocked (the robot hugs an obstacle) the search starts from the nearest
-    free cell, at the straight-line cost of getting there.
+    A path is the straight hop from ``start_xy`` to the centre of its cell (or, if that is blocked,
+    the robot hugging an obstacle, of the nearest free cell), then 8-connected steps between cell
+    centres: the cell it starts from reads that hop, not 0, wherever in it the start lies.
     """
     blocked = np.ascontiguousarray(floor_map.blocked)
     start = nearest_free_cell(floor_map, start_xy)
@@ -136,12 +137,15 @@ def shortest_path(floor_map: FloorMap, start_xy: Point, goal_xy: Point) -> list[
     dist = np.full(blocked.shape, np.inf)
     if not _dijkstra(blocked, start[0], start[1], 0.0, goal[0], goal[1], dist, parent):
         return None
-    cells = _backtrack(parent, goal, blocked.shape[1])
-    points = [cell_center(floor_map, c) for c in cells]
-    if points[0] != start_xy:
-        points.insert(0, start_xy)  # from the robot itself; if it stood blocked, this hop leaves the obstacle
-    points[-1] = goal_xy
-    return _shortcut(floor_map, points)
+    # from the robot itself (if it stood blocked, its first hop leaves the obstacle) through the cells'
+    # centres, the goal's included: a goal on its cell's corner may not be in sight of the cell before
+    # (the line grazes a blocked neighbour), and string pulling drops the centres it does not need
+    inner = [cell_center(floor_map, c) for c in _backtrack(parent, goal, blocked.shape[1])]
+    if inner[0] == start_xy:  # a start or goal on its cell's centre is not listed twice
+        inner = inner[1:]
+    if inner and inner[-1] == goal_xy:
+        inner = inner[:-1]
+    return _shortcut(floor_map, [start_xy, *inner, goal_xy])
 
 
 def _backtrack(parent: np.ndarray, goal: tuple[int, int], ny: int) -> list[tuple[int, int]]:
@@ -157,12 +161,9 @@ def _backtrack(parent: np.ndarray, goal: tuple[int, int], ny: int) -> list[tuple
 def _shortcut(floor_map: FloorMap, points: list[Point]) -> list[Point]:
     """Greedy string pulling: from each kept vertex jump to the farthest vertex still in line of sight.
 
-    The first hop is kept as it is when the start is blocked (leaving an obstacle cannot be free)."""
+    A blocked start keeps its first hop: no segment from a blocked cell is free."""
     out = [points[0]]
     i = 0
-    if not is_free(floor_map, points[0]) and len(points) > 1:
-        out.append(points[1])
-        i = 1
     while i < len(points) - 1:
         j = len(points) - 1
         while j > i + 1 and not segment_is_free(floor_map, points[i], points[j]):

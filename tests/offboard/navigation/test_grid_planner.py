@@ -8,7 +8,7 @@ import time
 import cv2
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from offboard.navigation.grid_planner import (distance_field, nearest_free_cell, path_length_m, path_lengths, segment_is_free,
@@ -100,6 +100,7 @@ def test_distance_field_is_fast_on_a_room_sized_map():
 
 
 @settings(max_examples=40, deadline=None)
+@example(seed=617, start=(2.0, 1.0), goal=(0.95, 0.1))  # a goal on a corner whose neighbour is blocked
 @given(seed=st.integers(0, 10_000), start=st.tuples(st.floats(0.1, 2.9), st.floats(0.1, 1.9)),
        goal=st.tuples(st.floats(0.1, 2.9), st.floats(0.1, 1.9)))
 def test_random_maps_paths_agree_with_the_field(seed, start, goal):
@@ -123,3 +124,45 @@ def test_goals_at_the_room_edges(goal):
     fmap = floor_map(np.zeros((60, 40), bool))
     path = shortest_path(fmap, (1.0, 1.0), goal)
     assert path is not None and path[-1] == goal
+
+
+def test_a_start_on_a_cell_centre_is_kept_when_the_goal_shares_its_cell():
+    """The path ends at the goal and begins at the robot, whose next waypoint callers read as path[1]."""
+    fmap = floor_map(np.zeros((20, 20), bool))
+    centre = ((3 + 0.5) * RES, (3 + 0.5) * RES)
+    path = shortest_path(fmap, centre, (0.16, 0.16))
+    assert path == [centre, (0.16, 0.16)]
+    assert path_length_m(path) == pytest.approx(math.dist(centre, (0.16, 0.16)))
+    assert shortest_path(fmap, centre, (0.8, 0.175)) == [centre, (0.8, 0.175)]  # not listed twice
+
+
+def test_the_distance_field_starts_with_the_hop_to_the_start_cells_centre():
+    """Free start cell or not, every cell reads the hop from the start to its cell's centre plus the
+    8-connected steps from there (path lengths of the search planner are built on these numbers)."""
+    field = distance_field(floor_map(np.zeros((20, 20), bool)), (0.01, 0.04))
+    hop = math.dist((0.01, 0.04), (0.025, 0.025))
+    assert field[0, 0] == pytest.approx(hop)
+    assert field[3, 0] == pytest.approx(hop + 3 * RES)
+    assert field[2, 2] == pytest.approx(hop + 2 * math.sqrt(2) * RES)
+
+
+def test_a_start_outside_the_room_starts_from_the_nearest_edge_cell():
+    """Odometry may put the robot a little beyond a wall: its cell is the room's edge cell on that
+    side, not one wrapped round to the far side."""
+    fmap = floor_map(np.zeros((60, 40), bool))
+    field = distance_field(fmap, (-0.3, 1.0))
+    assert field[0, 20] == pytest.approx(math.dist((-0.3, 1.0), (0.025, 1.025)))
+    path = shortest_path(fmap, (-0.3, 1.0), (0.5, 1.0))
+    assert path[0] == (-0.3, 1.0) and path[-1] == (0.5, 1.0)
+    assert path_length_m(path) < 0.9
+
+
+def test_a_star_finds_the_shortest_route_round_an_obstacle():
+    """A* with an inadmissible heuristic heads for the goal and settles for the long way round; the
+    grid path must be as short as the Dijkstra field says (string pulling only shortens it)."""
+    occupied = np.zeros((60, 40), bool)
+    occupied[29:31, 6:34] = True  # a wall across x = 1.5 m with gaps at both ends
+    fmap = floor_map(occupied)
+    start, goal = (20.5 * RES, 35.5 * RES), (50.5 * RES, 5.5 * RES)  # cell centres: the field is exact there
+    path = shortest_path(fmap, start, goal)
+    assert path_length_m(path) <= distance_field(fmap, start)[50, 5] + 1e-9
