@@ -280,3 +280,106 @@ def test_an_unmapped_object_is_not_slid_onto_a_wall():
     assert on_wall.accepted
     error = np.array([on_wall.pose.x_m - pose.x_m, on_wall.pose.y_m - pose.y_m, on_wall.pose.heading_rad])
     assert error @ np.linalg.solve(on_wall.covariance, error) < 11.3  # χ²(3) at 99 %
+
+
+def test_map_field_leaves_out_the_floor_noise_layer_below_the_band():
+    """The band starts at 0.15 m, a cube boundary: the 0.10-0.15 m layer (stereo noise on the floor)
+    is in no scan and must not be in the map (0.15 / 0.05 rounds down to 2.9999999999999996)."""
+    occupancy = OccupancyGrid(VoxelGrid((9.0, 5.0, 2.5), RES))
+    with occupancy.edit() as (log_odds, _):
+        log_odds[40, 50, 2] = 2.0  # 0.10-0.15 m high, at (2.025, 2.525)
+        log_odds[120, 50, 3] = 2.0  # 0.15-0.20 m high, at (6.025, 2.525)
+    below, in_band = map_field(occupancy).at(np.array([[2.025, 2.525], [6.025, 2.525]]))
+    assert below < -2.0 and in_band > -0.2
+
+
+@pytest.mark.parametrize("bad", ["scan", "prior"])
+def test_a_non_finite_scan_or_prior_is_an_error_not_a_refusal(bad):
+    scan = camera_scan(Pose2D(2.0, 2.5, 0.0), np.random.default_rng(0))
+    prior = Pose2D(2.0, 2.5, 0.0)
+    if bad == "scan":
+        scan[5, 1] = np.nan
+    else:
+        prior = Pose2D(math.nan, 2.5, 0.0)
+    with pytest.raises(ValueError, match=bad):
+        ScanMatcher().match(scan, prior, likelihood_field(box_outlines(), RES))
+
+
+def test_the_window_widens_to_reach_an_uncertain_prediction():
+    """0.4 m off, beyond the default 0.3 m window: a prediction that uncertain is searched 3σ wide."""
+    true_pose = Pose2D(2.0, 2.5, 0.0)
+    scan = camera_scan(true_pose, np.random.default_rng(0), fov_deg=90.0)
+    prior = Pose2D(2.4, 2.5, 0.0)
+    uncertain = np.diag([0.15 ** 2, 0.03 ** 2, 1e-4])
+    result = ScanMatcher().match(scan, prior, likelihood_field(box_outlines(), RES), uncertain)
+    assert result.accepted, result.reason
+    assert math.hypot(result.pose.x_m - true_pose.x_m, result.pose.y_m - true_pose.y_m) < 0.03
+
+
+def test_backing_off_couples_heading_to_position_behind_the_robot():
+    """A heading error swings where a drive ends: to the left of the drive direction, which backing
+    off points behind the robot, so the position-heading cross-terms change sign."""
+    heading = 0.3
+    left = np.array([-math.sin(heading), math.cos(heading)])
+    forward, backward = (PoseTracker(Pose2D(1.0, 1.0, heading)) for _ in range(2))
+    forward.predict(Pose2D(1.0 + 0.5 * math.cos(heading), 1.0 + 0.5 * math.sin(heading), heading))
+    backward.predict(Pose2D(1.0 - 0.5 * math.cos(heading), 1.0 - 0.5 * math.sin(heading), heading))
+    assert forward.covariance[:2, 2] @ left > 0 > backward.covariance[:2, 2] @ left
+
+
+def test_the_error_grows_across_the_world_direction_of_travel():
+    """Odometry turned a quarter turn from the world: a drive along odometry x runs along world y,
+    and the covariance is the odometry-aligned one turned by that quarter turn."""
+    aligned = PoseTracker(Pose2D(0.0, 0.0, 0.0))
+    turned = PoseTracker(Pose2D(0.0, 0.0, 0.0), world=Pose2D(0.0, 0.0, math.pi / 2))
+    aligned.predict(Pose2D(2.0, 0.0, 0.0))
+    turned.predict(Pose2D(2.0, 0.0, 0.0))
+    rotate = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    np.testing.assert_allclose(turned.covariance, rotate @ aligned.covariance @ rotate.T, atol=1e-12)
+
+
+def test_a_heading_measured_across_the_half_turn_is_close():
+    """Predicted just short of +π, measured just past -π: 0.02 rad apart, not 2π."""
+    tracker = PoseTracker(Pose2D(1.0, 1.0, math.pi - 0.01))
+    assert tracker.correct(Pose2D(1.0, 1.0, math.pi - 0.01), Pose2D(1.0, 1.0, -math.pi + 0.01),
+                           np.diag([1e-4, 1e-4, math.radians(0.5) ** 2]))
+    assert abs(math.cos(tracker.pose.heading_rad) + 1.0) < 1e-3
+
+
+def test_correct_predicts_to_its_own_odometry_reading():
+    """A match taken 1 m on, with no predict before it: the prediction to that reading comes first,
+    so the match agrees with it instead of lying 1 m off the last one."""
+    tracker = PoseTracker(Pose2D(0.0, 0.0, 0.0))
+    assert tracker.correct(Pose2D(1.0, 0.0, 0.0), Pose2D(1.01, 0.0, 0.0), np.diag([1e-4, 1e-4, 1e-4]))
+    assert tracker.pose.x_m == pytest.approx(1.0, abs=0.02) and tracker.pose.y_m == pytest.approx(0.0, abs=0.01)
+
+
+@pytest.mark.parametrize("wall_deg", [0.0, 20.0, 45.0, 70.0, 135.0])
+def test_a_slanted_wall_constrains_only_across_it(wall_deg):
+    """A single straight wall at any angle, seen 2 m ahead: the match pins the pose across the wall
+    and says nothing along it, so fusing it moves a prediction 0.1 m off both ways across only.
+    (Across is the information the match gives, the variance given the position along the wall: the
+    marginal one also holds the huge variance along the ridge's direction, known only to ~0.1°.)"""
+    along = np.array([math.cos(math.radians(wall_deg)), math.sin(math.radians(wall_deg))])
+    across = np.array([-along[1], along[0]])
+    t = np.arange(-4.0, 4.0, 0.01)
+    wall = np.array([4.5, 4.5]) + t[:, None] * along
+    occupied = np.zeros((180, 180), bool)
+    occupied[tuple(np.floor(wall / RES).astype(int).T)] = True
+    field = likelihood_field(occupied, RES, room_xy=(40.0, 40.0))  # the room's own walls out of reach
+    true_xy, heading = np.array([4.5, 4.5]) + 2.0 * across, math.atan2(-across[1], -across[0])
+    seen = wall[np.abs(t) < 0.7] + np.random.default_rng(1).normal(0.0, 0.02, (140, 2))
+    c, s = math.cos(heading), math.sin(heading)
+    scan = (seen - true_xy) @ np.array([[c, -s], [s, c]])
+    prior_xy = true_xy + 0.1 * across + 0.1 * along
+    prior = Pose2D(*prior_xy, heading)
+    result = ScanMatcher().match(scan, prior, field)
+    assert result.accepted, result.reason
+    assert abs((np.array([result.pose.x_m, result.pose.y_m]) - true_xy) @ across) < 0.03
+    position = result.covariance[:2, :2]
+    assert 1.0 / math.sqrt(across @ np.linalg.solve(position, across)) < 0.04
+    assert math.sqrt(along @ position @ along) > 10.0
+    tracker = PoseTracker(prior, covariance=np.diag([0.1 ** 2, 0.1 ** 2, math.radians(2.0) ** 2]))
+    assert tracker.correct(prior, result.pose, result.covariance)
+    moved = np.array([tracker.pose.x_m, tracker.pose.y_m]) - prior_xy
+    assert moved @ across == pytest.approx(-0.1, abs=0.04) and abs(moved @ along) < 0.01
