@@ -159,11 +159,8 @@ def _distance_to_walls(x: np.ndarray, y: np.ndarray, room: tuple[float, float]) 
 
 def map_field(occupancy: OccupancyGrid, config: MatchConfig = MatchConfig()) -> LikelihoodField:
     """The likelihood field of an occupancy grid's columns in the scan's height band."""
-    res = occupancy.grid.resolution_m
-    k0 = max(int(math.floor(config.band_min_m / res + 1e-9)), 0)  # 0.15 / 0.05 is 2.9999999999999996
-    k1 = min(int(math.ceil(config.band_max_m / res)), occupancy.grid.shape[2])
-    occupied = occupancy.occupied()[:, :, k0:k1].any(axis=2)
-    return likelihood_field(occupied, res, config, tuple(occupancy.grid.size_m[:2]))
+    occupied = occupancy.occupied()[:, :, occupancy.grid.layers(config.band_min_m, config.band_max_m)].any(axis=2)
+    return likelihood_field(occupied, occupancy.grid.resolution_m, config, tuple(occupancy.grid.size_m[:2]))
 
 
 def structure_in_view(field: LikelihoodField, pose: Pose2D, pans_rad: np.ndarray, hfov_rad: float,

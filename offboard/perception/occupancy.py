@@ -225,9 +225,7 @@ class OccupancyGrid:
         """Columns blocked for the base: anything occupied from ``floor_clearance_m`` (stereo noise on
         the floor is not an obstacle) up to the robot's height, inflated by its radius."""
         res = self.grid.resolution_m
-        k0 = max(int(math.floor(floor_clearance_m / res)), 0)
-        k1 = min(int(math.ceil(robot_height_m / res)), self.grid.shape[2])
-        band = slice(k0, k1)
+        band = self.grid.layers(floor_clearance_m, robot_height_m)
         occupied = self.occupied()[:, :, band].any(axis=2)
         unknown = ~self._observed[:, :, band].any(axis=2)
         radius_cells = int(math.ceil(robot_radius_m / res))

@@ -63,6 +63,13 @@ class VoxelGrid:
     def center_of(self, index: np.ndarray) -> np.ndarray:
         return self.origin + (np.asarray(index) + 0.5) * self.resolution_m
 
+    def layers(self, low_m: float, high_m: float) -> slice:
+        """The layers of cubes that reach between heights ``low_m`` and ``high_m`` (world z). A height
+        on a face between layers, up to round-off (0.15 / 0.05 is 2.9999999999999996), is that face."""
+        z0, res = self.origin_m[2], self.resolution_m
+        return slice(max(int(math.floor((low_m - z0) / res + 1e-9)), 0),
+                     min(int(math.ceil((high_m - z0) / res - 1e-9)), self.shape[2]))
+
     def box_slices(self, min_m: np.ndarray, max_m: np.ndarray) -> tuple[slice, slice, slice]:
         """Index slices of the cubes whose centres lie inside an axis-aligned box."""
         lo = np.ceil((np.asarray(min_m) - self.origin) / self.resolution_m - 0.5).astype(int)
