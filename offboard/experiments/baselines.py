@@ -193,8 +193,7 @@ class Frontier(_Tour):
         if not frontier.any():
             return np.zeros(len(self.planner.positions), bool)
         to_frontier = cv2.distanceTransform((~frontier).astype(np.uint8), cv2.DIST_L2, 5) * floor.resolution_m
-        cells = np.floor(self.planner.positions / floor.resolution_m).astype(int)
-        cells = np.clip(cells, 0, np.array(to_frontier.shape) - 1)
+        cells = floor.cells_of(self.planner.positions)
         return to_frontier[cells[:, 0], cells[:, 1]] <= self.config.frontier_radius_m
 
 

@@ -37,10 +37,8 @@ _NEIGHBOURS = np.array([(1, 0, 1.0), (-1, 0, 1.0), (0, 1, 1.0), (0, -1, 1.0),
 
 def cell_of(floor_map: FloorMap, xy: Point) -> tuple[int, int]:
     """Index of the cell holding a world point, clamped into the map (the map starts at the origin)."""
-    nx, ny = floor_map.blocked.shape
-    res = floor_map.resolution_m
-    return (min(max(int(math.floor(xy[0] / res)), 0), nx - 1),
-            min(max(int(math.floor(xy[1] / res)), 0), ny - 1))
+    i, j = floor_map.cells_of(np.array([xy]))[0]
+    return int(i), int(j)
 
 
 def cell_center(floor_map: FloorMap, cell: tuple[int, int]) -> Point:

@@ -76,6 +76,12 @@ class FloorMap:
     blocked: np.ndarray  # (nx, ny) bool: occupied inflated by the robot radius, plus the walls
     unknown: np.ndarray  # (nx, ny) bool: no cube of the band observed
 
+    def cells_of(self, xy_m: np.ndarray) -> np.ndarray:
+        """Indices (n, 2) of the cells holding the floor points ``xy_m`` (n, 2), clamped into the map
+        (which starts at the origin): a point just outside a wall reads the wall's own cell."""
+        cells = np.floor(np.asarray(xy_m, np.float64) / self.resolution_m).astype(np.int64)
+        return np.clip(cells, 0, np.array(self.blocked.shape) - 1)
+
 
 class OccupancyGrid:
     def __init__(self, grid: VoxelGrid, config: OccupancyConfig = OccupancyConfig()):

@@ -150,7 +150,7 @@ class SearchPlanner:
                                           self.mount.height_m, self.belief.grid.size_m, margin_m,
                                           self.config.viewpoint_lattice_m)
         aimed = self._aimed.propose(self.belief.coarse_mass().reshape(len(self._blocks_m), -1), self.config.viewpoints)
-        cells = np.clip(np.floor(aimed / floor.resolution_m).astype(int), 0, np.array(floor.blocked.shape) - 1)
+        cells = floor.cells_of(aimed)
         aimed = aimed[~floor.blocked[cells[:, 0], cells[:, 1]]] if len(aimed) else aimed
         self.positions = np.vstack([self.vertices[np.sort(near)], aimed])
         return self.positions
