@@ -89,7 +89,8 @@ class TargetBelief:
 
     def set_prior(self, weights: np.ndarray, prob_outside: float) -> None:
         """Start afresh: p(c_i) ∝ ``weights`` (non-negative, grid-shaped), the facing unknown, nothing
-        seen yet (no cube ruled out, no facing blocked, P[F] = 0)."""
+        seen yet (no cube ruled out, no facing blocked, P[F] = 0). All-zero weights say the target is
+        not in the room: p(c_out) = 1 whatever ``prob_outside`` is."""
         weights = self._grid_factors(weights, "prior weights")
         if not 0.0 <= prob_outside < 1.0:
             raise ValueError(f"p(c_out) must lie in [0, 1), not {prob_outside}")
@@ -129,8 +130,13 @@ class TargetBelief:
         support surfaces, saliency). p(c_out) stays: such a prior says where in the room the target
         is more likely, not whether it is in the room."""
         factors = self._grid_factors(factors, "reweighting factors")
+        if factors.max() * max(self._stored_total, 1.0) > _FLOAT32_MAX / 2:  # stored masses ≤ their total
+            raise ValueError(f"reweighting factors up to {factors.max():g} overflow the float32 masses")
+        factors = factors.astype(np.float32)
+        if not factors.any():
+            raise ValueError("reweighting factors are all zero (in float32): p(c_out) would become 1")
         inside_before = self._mass.sum(dtype=np.float64)
-        self._mass *= factors.astype(np.float32)[..., None]
+        self._mass *= factors[..., None]
         self._keep_inside_total(inside_before)
         self._renormalise()
 
@@ -155,38 +161,68 @@ class TargetBelief:
         each of them and each facing sector, shape (n, facing_sectors). Returns the look's detection
         probability P_Ψ(f) (eq. 1) and folds it into P[F] (eq. 2).
         """
-        b = np.ascontiguousarray(detection_prob, np.float32).reshape(len(cube_index), self.facing_sectors)
-        if b.size and not (b.min() >= 0.0 and b.max() <= 1.0):  # NaN fails both
-            raise ValueError(f"detection_prob must lie in [0, 1], not in [{b.min()}, {b.max()}]")
-        found_prob = self.observe(cube_index, 1.0 - b)  # eq. 1: Σ p(c) b(c, f), before the update
+        cube_index = self._cube_index(cube_index)
+        b = self._detection_prob(detection_prob, len(cube_index), np.float32)
+        found_prob = self._observe(cube_index, 1.0 - b)  # eq. 1: Σ p(c) b(c, f), before the update
         self.success_prob += (1.0 - self.success_prob) * found_prob  # eq. 2, one more term
         return found_prob
 
     def expected_detection(self, cube_index: np.ndarray, detection_prob: np.ndarray) -> float:
         """Eq. 1, P_Ψ(f) = Σ p(c) b(c, f), over a look's cubes, without updating anything."""
-        mass = self._mass.reshape(-1, self.facing_sectors)[np.asarray(cube_index, np.int64)]
-        b = np.asarray(detection_prob, np.float64).reshape(mass.shape)
+        cube_index = self._cube_index(cube_index)
+        b = self._detection_prob(detection_prob, len(cube_index), np.float64)
+        mass = self._mass.reshape(-1, self.facing_sectors)[cube_index]
         return float((mass * b).sum()) * self._scale
+
+    def _detection_prob(self, detection_prob: np.ndarray, n: int, dtype: type) -> np.ndarray:
+        b = self._per_facing(detection_prob, n, "detection_prob", dtype)
+        if b.size and not (b.min() >= 0.0 and b.max() <= 1.0):  # NaN fails both
+            raise ValueError(f"detection_prob must lie in [0, 1], not in [{b.min()}, {b.max()}]")
+        return b
+
+    def _per_facing(self, values: np.ndarray, n: int, what: str, dtype: type) -> np.ndarray:
+        """``values`` as an (n, facing_sectors) array: a transposed or flat one is refused, not reshaped."""
+        values = np.ascontiguousarray(values, dtype)
+        if values.shape != (n, self.facing_sectors):
+            raise ValueError(f"{what} must be of shape {(n, self.facing_sectors)}, not {values.shape}")
+        return values
+
+    def _cube_index(self, cube_index: np.ndarray) -> np.ndarray:
+        """The listed cubes as int64, each in the grid (the kernel checks no bounds) and listed once (a
+        repeat would be updated twice and counted twice in eq. 1)."""
+        cube_index = np.ascontiguousarray(cube_index, np.int64)
+        if cube_index.ndim != 1:
+            raise ValueError(f"cube_index must be 1-D, not of shape {cube_index.shape}")
+        if cube_index.size and not (cube_index.min() >= 0 and cube_index.max() < self.grid.num_cubes):
+            raise ValueError(f"cube_index must lie in [0, {self.grid.num_cubes}), not in "
+                             f"[{cube_index.min()}, {cube_index.max()}]")
+        if not np.all(cube_index[1:] > cube_index[:-1]):  # a footprint comes sorted: O(n) then
+            ordered = np.sort(cube_index)
+            repeated = ordered[1:][ordered[1:] == ordered[:-1]]
+            if repeated.size:
+                raise ValueError(f"cube_index lists cube {repeated[0]} more than once")
+        return cube_index
 
     def observe(self, cube_index: np.ndarray, likelihood: np.ndarray) -> float:
         """Bayes' rule for one observation: every listed cube's mass, per facing sector, times its
         ``likelihood`` (n, facing_sectors) relative to every other cube and to c_out, whose factor is
         1; then normalised (eq. 4's denominator). Returns the probability that left the listed cubes
         (negative if they gained)."""
-        likelihood = np.ascontiguousarray(likelihood, np.float32).reshape(len(cube_index), self.facing_sectors)
+        cube_index = self._cube_index(cube_index)
+        likelihood = self._per_facing(likelihood, len(cube_index), "likelihood", np.float32)
         if np.any(likelihood < 0) or not np.all(np.isfinite(likelihood)):
             raise ValueError("likelihoods must be finite and non-negative")
-        cube_index = np.ascontiguousarray(cube_index, np.int64)
-        if cube_index.size and not (cube_index.min() >= 0 and cube_index.max() < self.grid.num_cubes):
-            raise ValueError(f"cube_index must lie in [0, {self.grid.num_cubes}), not in "
-                             f"[{cube_index.min()}, {cube_index.max()}]")  # the kernel checks no bounds
+        return self._observe(cube_index, likelihood)
+
+    def _observe(self, cube_index: np.ndarray, likelihood: np.ndarray) -> float:
+        """:meth:`observe` of checked input."""
         saved = self._mass.reshape(-1, self.facing_sectors)[cube_index] if self._outside <= 0 else None  # a copy
-        removed = _scale_seen_mass(self._mass.reshape(-1, self.facing_sectors), self._coarse.reshape(-1, self.facing_sectors),
-                                   cube_index, likelihood,
-                                   np.array(self.grid.shape, np.int64), np.array(self.coarse_shape, np.int64),
-                                   self.coarse_factor)
+        removed, kept = _scale_seen_mass(self._mass.reshape(-1, self.facing_sectors),
+                                         self._coarse.reshape(-1, self.facing_sectors), cube_index, likelihood,
+                                         np.array(self.grid.shape, np.int64), np.array(self.coarse_shape, np.int64),
+                                         self.coarse_factor)
         left = removed * self._scale
-        if self._stored_total - removed <= 0:  # possible only with p(c_out) = 0; the belief stays as it was
+        if self._stored_total - removed <= 0 or self._nothing_kept(kept):  # the belief stays as it was
             if saved is not None:
                 self._mass.reshape(-1, self.facing_sectors)[cube_index] = saved
                 self._rebuild_coarse()
@@ -196,6 +232,12 @@ class TargetBelief:
         if not 1e-6 < self._scale < 1e6:  # keep stored values in float32's comfortable range
             self._renormalise()
         return left
+
+    def _nothing_kept(self, kept: float) -> bool:
+        """No mass left anywhere: tested on the masses themselves, as the running total drifts by
+        float32 rounding and may stay just above 0. The full pass runs only if c_out and the listed
+        cubes keep nothing."""
+        return self._outside <= 0 and kept <= 0 and not self._mass.any()
 
     # --- checkpoint ----------------------------------------------------------------------------------
 
@@ -225,22 +267,34 @@ class TargetBelief:
         """Cubes stereo has seen empty (grid-shaped bool) keep only ``empty_factor`` of their mass, all
         facings alike; each cube once (the occupancy map already sums its evidence over the looks).
         Returns the probability that left them."""
+        self._check_mask(empty, "empty")
+        self._check_share(empty_factor, "empty_factor")
         new = np.flatnonzero(np.asarray(empty, bool) & ~self._seen_empty)
-        self._seen_empty.flat[new] = True
-        if not len(new):
-            return 0.0
-        return self.observe(new, np.full((len(new), self.facing_sectors), empty_factor, np.float32))
+        likelihood = np.full((len(new), self.facing_sectors), empty_factor, np.float32)
+        left = self._observe(new, likelihood) if len(new) else 0.0
+        self._seen_empty.flat[new] = True  # only once applied: evidence refused now is applied next time
+        return left
+
+    def _check_mask(self, mask: np.ndarray, what: str) -> None:
+        if np.shape(mask) != self.grid.shape:  # a smaller mask would broadcast
+            raise ValueError(f"{what} must be a mask of shape {self.grid.shape}, not {np.shape(mask)}")
+
+    @staticmethod
+    def _check_share(factor: float, what: str) -> None:
+        if not 0.0 <= factor <= 1.0:  # NaN fails too; above 1 would add mass
+            raise ValueError(f"{what} must lie in [0, 1], not {factor}")
 
     def rule_out_blocked_facings(self, solid: np.ndarray, near_m: float, far_m: float, factor: float) -> float:
         """A picture faces open space: a facing with a ``solid`` cube (grid-shaped bool, the mapped
         surfaces) between ``near_m`` and ``far_m`` in front of a cube's centre keeps only ``factor`` of
         its mass; each (cube, facing) once. :meth:`exclude_facings_into_walls` does this for the room's
         walls at the start; this does it for what the map finds. Returns the probability that left."""
+        self._check_mask(solid, "solid")
+        self._check_share(factor, "factor")
         if self.facing_sectors == 1:
             return 0.0
         sectors, (nx, ny, nz) = self.facing_sectors, self.grid.shape
         solid_cube = np.flatnonzero(solid & ~self._solid_done)  # a cube solid before blocked its facings then
-        self._solid_done.flat[solid_cube] = True
         i, j = solid_cube // (ny * nz), (solid_cube // nz) % ny
         pairs = []  # (cube × sectors + sector) of every facing that has a solid cube ahead
         for s, (dx, dy) in self._facing_steps(near_m, far_m):
@@ -249,13 +303,17 @@ class TargetBelief:
         pairs = np.concatenate(pairs) if pairs else np.zeros(0, np.int64)
         blocked = self._facing_blocked.reshape(-1)
         new = np.unique(pairs[~blocked[pairs]])
-        blocked[new] = True
-        if not len(new):
-            return 0.0
-        cubes, row = np.unique(new // sectors, return_inverse=True)
-        likelihood = np.ones((len(cubes), sectors), np.float32)
-        likelihood[row, new % sectors] = factor
-        return self.observe(cubes, likelihood)
+        left = self._keep_share(new, factor) if len(new) else 0.0
+        blocked[new] = True  # only once applied: evidence refused now is applied next time
+        self._solid_done.flat[solid_cube] = True
+        return left
+
+    def _keep_share(self, pairs: np.ndarray, factor: float) -> float:
+        """Observe ``factor`` on the (cube × sectors + sector) ``pairs``, 1 on the cubes' other facings."""
+        cubes, row = np.unique(pairs // self.facing_sectors, return_inverse=True)
+        likelihood = np.ones((len(cubes), self.facing_sectors), np.float32)
+        likelihood[row, pairs % self.facing_sectors] = factor
+        return self._observe(cubes, likelihood)
 
     def _facing_steps(self, near_m: float, far_m: float) -> list[tuple[int, tuple[int, int]]]:
         """(sector, cube offset) of every cube between ``near_m`` and ``far_m`` ahead along each facing,
@@ -303,6 +361,7 @@ class TargetBelief:
 
 
 _CHUNK = 1 << 20  # (cube, facing) values per float64 temporary: 8 MB
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def _scaled_total(flat: np.ndarray, scale: float, lo: int, n: int) -> float:
@@ -317,8 +376,8 @@ def _scaled_total(flat: np.ndarray, scale: float, lo: int, n: int) -> float:
 @numba.njit(cache=True)
 def _scale_seen_mass(mass, coarse, cube_index, factor, shape, coarse_shape, factor_coarse):
     """m(c, k) *= factor(c, k) for the listed cubes, mirrored into the coarse blocks; returns the
-    stored mass that left them, Σ m (1 - factor)."""
-    removed_total = 0.0
+    stored mass that left them, Σ m (1 - factor), and the stored mass they kept."""
+    removed_total = kept_total = 0.0
     plane = shape[1] * shape[2]
     for n in range(cube_index.shape[0]):
         c = cube_index[n]
@@ -330,4 +389,5 @@ def _scale_seen_mass(mass, coarse, cube_index, factor, shape, coarse_shape, fact
             mass[c, s] = kept
             coarse[block, s] -= removed
             removed_total += removed
-    return removed_total
+            kept_total += mass[c, s]  # as stored: a float32 that rounds to 0 keeps nothing
+    return removed_total, kept_total

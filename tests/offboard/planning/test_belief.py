@@ -75,6 +75,7 @@ def test_eq2_success_probability_accumulates():
     p1 = belief.update_after_miss(idx, np.full((idx.size, 1), 0.5))
     p2 = belief.update_after_miss(idx, np.full((idx.size, 1), 0.5))
     assert p1 == pytest.approx(0.25) and belief.success_prob == pytest.approx(p1 + (1 - p1) * p2)
+    assert p2 == pytest.approx(0.125 / 0.75)  # of the probability after the first miss, not of the stored mass
 
 
 def test_a_second_look_from_the_same_side_is_worth_less_than_one_from_a_new_side():
@@ -340,3 +341,161 @@ def test_a_detection_probability_outside_0_to_1_is_refused_by_name(b):
     with pytest.raises(ValueError, match=r"detection_prob must lie in \[0, 1\]"):
         belief.update_after_miss(np.arange(3), np.full((3, 2), b))
     assert belief.success_prob == 0.0 and belief.prob_outside == pytest.approx(0.05)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_an_observation_leaving_nothing_is_refused_though_the_running_total_drifts(seed):
+    """The guard read the running total, which float32 rounding leaves ~1e-9 above 0: about half of
+    such observations passed and turned the whole belief into NaN."""
+    rng = np.random.default_rng(seed)
+    belief = TargetBelief(GRID, facing_sectors=4, prob_outside=0.0)
+    for _ in range(5):
+        belief.update_after_miss(*_random_look(rng, belief))
+    with pytest.raises(ValueError, match="no probability anywhere"):
+        belief.observe(np.arange(GRID.num_cubes), np.zeros((GRID.num_cubes, 4)))
+    with pytest.raises(ValueError, match="no probability anywhere"):
+        belief.rule_out_empty(np.ones(GRID.shape, bool), 0.0)
+    with pytest.raises(ValueError, match="no probability anywhere"):  # kept in float64, 0 as stored in float32
+        belief.observe(np.arange(GRID.num_cubes), np.full((GRID.num_cubes, 4), 1e-44))
+    assert belief.target_prob.sum() == pytest.approx(1.0, abs=1e-5)
+
+
+@pytest.mark.parametrize("factors, match", [(np.full(GRID.shape, 1e39), "overflow"),
+                                            (np.zeros(GRID.shape), "all zero"),
+                                            (np.full(GRID.shape, 1e-50), "all zero")])
+def test_reweighting_that_would_overflow_or_empty_the_room_is_refused(factors, match):
+    """A finite factor past float32's range made every mass NaN; all-zero factors moved p(c_out) to 1."""
+    belief = TargetBelief(GRID, facing_sectors=2)
+    with pytest.raises(ValueError, match=match):
+        belief.reweight(factors)
+    assert belief.prob_outside == pytest.approx(0.05) and np.isfinite(belief.target_prob).all()
+
+
+def test_a_factor_of_zero_on_some_cubes_rules_them_out():
+    belief = TargetBelief(GRID, facing_sectors=2)
+    factors = np.ones(GRID.shape)
+    factors[:10] = 0.0
+    belief.reweight(factors)
+    assert belief.target_prob[:10].sum() == 0 and belief.prob_outside == pytest.approx(0.05)
+    belief.set_prior(factors, 0.05)
+    assert belief.target_prob[:10].sum() == 0 and belief.target_prob.sum() == pytest.approx(0.95)
+
+
+@pytest.mark.parametrize("method", ["update_after_miss", "expected_detection", "observe"])
+@pytest.mark.parametrize("cubes, values, match", [
+    (np.arange(3), np.full((2, 3), 0.5), r"must be of shape \(3, 2\)"),  # transposed
+    (np.arange(3), np.full(6, 0.5), r"must be of shape \(3, 2\)"),  # flat
+    (np.arange(4).reshape(2, 2), np.full((4, 2), 0.5), "cube_index must be 1-D"),
+    (np.array([7, 3, 7]), np.full((3, 2), 0.5), "lists cube 7 more than once"),
+    (np.array([3, 3]), np.full((2, 2), 0.5), "lists cube 3 more than once")])
+def test_a_look_of_the_wrong_layout_or_with_a_cube_twice_is_refused(method, cubes, values, match):
+    """These were reshaped and accepted; a cube listed twice kept (1 − b)² and counted twice in eq. 1."""
+    belief = TargetBelief(GRID, facing_sectors=2)
+    before = belief.mass_by_facing()
+    with pytest.raises(ValueError, match=match):
+        getattr(belief, method)(cubes, values)
+    assert np.array_equal(belief.mass_by_facing(), before) and belief.success_prob == 0.0
+
+
+@pytest.mark.parametrize("method", ["rule_out_empty", "rule_out_blocked_facings"])
+def test_a_mask_not_of_the_grids_shape_is_refused(method):
+    """An (nz,) mask broadcast over the grid."""
+    belief = TargetBelief(GRID, facing_sectors=4)
+    args = (0.15, 0.3, 0.1) if method == "rule_out_blocked_facings" else (0.05,)
+    with pytest.raises(ValueError, match=r"must be a mask of shape \(20, 10, 5\), not \(5,\)"):
+        getattr(belief, method)(np.ones(GRID.shape[2], bool), *args)
+
+
+@pytest.mark.parametrize("b, index, match", [(np.nan, 0, r"detection_prob must lie in \[0, 1\]"),
+                                             (-0.5, 0, r"detection_prob must lie in \[0, 1\]"),
+                                             (0.5, -1, r"cube_index must lie in \[0, 1000\)")])
+def test_the_expected_detection_refuses_what_a_miss_refuses(b, index, match):
+    """It validated nothing: index −1 wrapped round, b NaN or negative gave a NaN or negative P_Ψ."""
+    belief = TargetBelief(GRID, facing_sectors=2)
+    with pytest.raises(ValueError, match=match):
+        belief.expected_detection(np.array([5, index]), np.full((2, 2), b))
+
+
+def test_the_expected_detection_is_eq1_on_the_current_belief():
+    """It once dropped the stored masses' scale: right only before the first update."""
+    belief = TargetBelief(GRID, facing_sectors=2, prob_outside=0.1)
+    belief.update_after_miss(np.arange(300), np.full((300, 2), 0.8))
+    cubes, b = np.arange(200, 500), np.full((300, 2), 0.5)
+    assert belief.expected_detection(cubes, b) == pytest.approx(0.5 * belief.target_prob.reshape(-1)[cubes].sum())
+
+
+@pytest.mark.parametrize("factor", [1.5, -0.1, np.nan])
+def test_a_share_kept_outside_0_to_1_is_refused(factor):
+    """An empty_factor above 1 added mass to cubes seen empty."""
+    belief = TargetBelief(GRID, facing_sectors=4)
+    with pytest.raises(ValueError, match="empty_factor must lie in"):
+        belief.rule_out_empty(np.ones(GRID.shape, bool), factor)
+    with pytest.raises(ValueError, match="factor must lie in"):
+        belief.rule_out_blocked_facings(np.ones(GRID.shape, bool), 0.15, 0.3, factor)
+
+
+def test_evidence_refused_is_applied_when_it_comes_again():
+    """The cubes and facings were marked done before the update, which then refused: never applied."""
+    belief = TargetBelief(GRID, facing_sectors=4, prob_outside=0.0)
+    with pytest.raises(ValueError, match="no probability anywhere"):
+        belief.rule_out_empty(np.ones(GRID.shape, bool), 0.0)
+    assert belief.rule_out_empty(np.ones(GRID.shape, bool), 0.5) == pytest.approx(0.5)
+    belief.set_prior(np.ones(GRID.shape), 0.0)
+    just_west = np.zeros((*GRID.shape, 4))
+    just_west[7:9, :, :, 0] = 1.0  # all the mass just west of a surface at x = 1.0-1.1 m, facing it (+x)
+    belief.observe(np.arange(GRID.num_cubes), just_west.reshape(-1, 4))
+    solid = np.zeros(GRID.shape, bool)
+    solid[10] = True
+    with pytest.raises(ValueError, match="no probability anywhere"):
+        belief.rule_out_blocked_facings(solid, 0.2, 0.3, 0.0)
+    assert belief.rule_out_blocked_facings(solid, 0.2, 0.3, 0.5) == pytest.approx(0.5)
+
+
+def test_mass_gained_again_and_again_is_renormalised_before_float32_overflows():
+    belief = TargetBelief(GRID, facing_sectors=1, prob_outside=0.05)
+    for _ in range(12):
+        belief.observe(np.array([0]), np.array([[1e5]]))
+    assert np.isfinite(belief.mass_by_facing()).all() and belief.target_prob.flat[0] == pytest.approx(1.0)
+
+
+def test_a_detection_probability_of_one_is_accepted_and_empties_the_cube():
+    belief = TargetBelief(GRID, facing_sectors=2)
+    assert belief.update_after_miss(np.arange(3), np.ones((3, 2))) == pytest.approx(0.95 * 3 / GRID.num_cubes)
+    assert belief.target_prob.flat[:3].sum() == 0
+
+
+def test_no_facing_sectors_is_refused():
+    with pytest.raises(ValueError, match="facing_sectors ≥ 1"):
+        TargetBelief(GRID, facing_sectors=0)
+
+
+def test_a_surface_across_y_blocks_the_facings_toward_it():
+    belief = TargetBelief(GRID, facing_sectors=4, prob_outside=0.1)  # facings +x, +y, -x, -y
+    solid = np.zeros(GRID.shape, bool)
+    solid[:, 6] = True  # a surface along x at y = 0.6-0.7 m
+    belief.rule_out_blocked_facings(solid, 0.2, 0.3, 0.1)
+    mass = belief.mass_by_facing()
+    before = mass[0, 0, 0, 1]
+    assert np.allclose(mass[:, 3:5, :, 1], 0.1 * before) and np.allclose(mass[:, 3:5, :, 3], before)  # south, facing it
+    assert np.allclose(mass[:, 8:10, :, 3], 0.1 * before) and np.allclose(mass[:, 8:10, :, 1], before)  # north, facing back
+
+
+def test_a_fresh_prior_or_a_restored_state_forgets_the_surfaces_folded_in():
+    """set_prior left the blocked facings and the solid cubes done; restore left the solid cubes done:
+    the same surface was then never folded in again."""
+    solid = np.zeros(GRID.shape, bool)
+    solid[10] = True
+    belief = TargetBelief(GRID, facing_sectors=4)
+    fresh_state = TargetBelief(GRID, facing_sectors=4).state()
+    belief.rule_out_blocked_facings(solid, 0.2, 0.3, 0.1)
+    belief.set_prior(np.ones(GRID.shape), 0.05)
+    assert belief.rule_out_blocked_facings(solid, 0.2, 0.3, 0.1) > 0
+    belief.restore(fresh_state)
+    assert belief.rule_out_blocked_facings(solid, 0.2, 0.3, 0.1) > 0
+
+
+def test_a_state_of_another_dtype_is_refused():
+    belief = TargetBelief(GRID, facing_sectors=2)
+    state = dict(belief.state(), mass=belief.state()["mass"].astype(np.float64))
+    with pytest.raises(ValueError, match="belief mass: expected float32"):
+        belief.restore(state)

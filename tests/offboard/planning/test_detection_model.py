@@ -16,7 +16,7 @@ from offboard.planning.detection_function import look_footprint, visible_depth
 from offboard.planning.detection_model import (depth_sigma_m, detection_likelihood, located_along_rays,
                                                located_at_point)
 from offboard.search.loop import SearchConfig
-from shared.geometry import HeadMount, Intrinsics, Pose2D
+from shared.geometry import HeadMount, Intrinsics, Pose2D, RigidTransform
 
 K = Intrinsics.from_fov(640, 480, 66.0)
 ROOM = VoxelGrid((4.0, 3.0, 2.5), 0.05)
@@ -111,3 +111,30 @@ def test_far_away_one_confident_detection_leaves_the_search_looking_and_a_second
 def test_no_detector_is_infallible():
     with pytest.raises(ValueError, match="positive"):
         detection_likelihood(ROOM, np.arange(3), np.zeros((3, 1)), np.ones(3) / 3, 0.0)
+
+
+def test_a_located_detection_is_the_gaussian_of_its_distance_cut_at_three_sigma():
+    along_x = np.arange(ROOM.shape[0])
+    cube_index = np.ravel_multi_index((along_x, np.full_like(along_x, 30), np.full_like(along_x, 24)), ROOM.shape)
+    at = ROOM.center_of(np.array([40, 30, 24]))
+    sigma = 0.07  # 3 σ = 0.21 m: the cubes 4 either side (0.2 m) are in, the 5th (0.25 m) out
+    d = ROOM.resolution_m * (along_x - 40)
+    expected = np.where(np.abs(d) <= 3 * sigma, np.exp(-0.5 * (d / sigma) ** 2), 0.0)
+    np.testing.assert_allclose(located_at_point(ROOM, cube_index, at, sigma), expected / expected.sum(),
+                               rtol=1e-9, atol=1e-15)
+
+
+def test_depth_uncertainty_adds_the_floor_and_the_stereo_spread_in_quadrature():
+    stereo = 5.0**2 * 0.5 / (K.fx_px * 0.12)  # z² σ_d / (f b), with the default 0.5 px disparity noise
+    assert depth_sigma_m(5.0, K, 0.12, 0.1) == pytest.approx(math.hypot(0.1, stereo), rel=1e-12)
+
+
+def test_a_detection_without_depth_is_on_its_rays_in_front_of_the_camera_box_edges_included():
+    """A box shrunk to the image centre keeps the optical axis: exactly the cubes on it, in front."""
+    looks_along_x = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # columns: camera x, y, z
+    camera = RigidTransform(looks_along_x, ROOM.center_of(np.array([20, 30, 24])))
+    i, j, k = np.meshgrid(np.arange(ROOM.shape[0]), np.arange(29, 32), np.arange(23, 26), indexing="ij")
+    cube_index = np.ravel_multi_index((i.ravel(), j.ravel(), k.ravel()), ROOM.shape)
+    located = located_along_rays(ROOM, cube_index, (K.cx_px, K.cy_px, K.cx_px, K.cy_px), camera, K)
+    on_axis_ahead = (j.ravel() == 30) & (k.ravel() == 24) & (i.ravel() > 20)  # behind it, the axis too projects there
+    np.testing.assert_array_equal(located, np.where(on_axis_ahead, 1.0 / on_axis_ahead.sum(), 0.0))
