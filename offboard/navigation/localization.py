@@ -13,17 +13,16 @@ room's walls (the room's extent is known, report §3.1):
    narrower than the error refuses every match until the map, built on the wrong heading, agrees
    with it; a position already farther off than the 0.6 m cap stays so), then a fine grid around
    the best coarse pose. The coarse grid's
-   normalised likelihoods give the match's covariance, so a scan that sees a single wall is
-   confident across the wall and not along it (where the likelihood stays high at both edges of the
-   window, the covariance says nothing at all, not the window's width). A likelihood that reaches
-   an x or y edge is searched again on a grid turned along the major axis of that covariance: a
-   slanted wall's ridge of equal fits then runs along a grid axis, as a wall parallel to the
-   room's does;
+   normalised likelihoods give the match's covariance, so a scan that sees a single wall parallel
+   to the room's is confident across the wall and not along it (where the likelihood stays high at
+   both edges of the window, the covariance says nothing at all, not the window's width). A wall at
+   another angle is judged on the room's axes, so its match loses the constraint across it, or at
+   45° is refused; docs/trials/slanted-wall-match.patch judges it along the wall, not yet measured
+   on its own (the simulator's rooms have no slanted wall);
 3. **rejection**: too few points, too few of them on the map, a likelihood that still rises at an
-   edge of the window (for a ridge, on the turned grid: across it, in heading, or at one end only;
-   its optimum may lie beyond, and the grid's moments then describe the window, not the match), or
-   (in :class:`PoseTracker`) a Mahalanobis distance to the prediction beyond a χ² gate: a bad
-   match never reaches the pose, nor (placed with it) the map;
+   edge of the window (its optimum may lie beyond, and the grid's moments then describe the window,
+   not the match), or (in :class:`PoseTracker`) a Mahalanobis distance to the prediction beyond a χ²
+   gate: a bad match never reaches the pose, nor (placed with it) the map;
 4. **fusion**: :class:`PoseTracker` is an EKF over the world pose whose prediction is the odometry
    (its covariance grows with the distance driven and the angle turned); an accepted match is its
    measurement. The estimate is kept as an offset transform ``world_from_odom``, so any odometry pose
@@ -47,7 +46,6 @@ from shared.geometry import HeadMount, Intrinsics, Pose2D, wrap_angle
 log = logging.getLogger(__name__)
 
 _NO_INFORMATION = 1e4  # variance (m², rad²) along an axis the match does not constrain
-_ALIGNED_RAD = 1e-6  # a ridge this close to an axis is judged on the axes (the turned grid is the same)
 _STILL_M = 0.01  # a displacement this small between two odometry readings is jitter, not travel
 
 
@@ -196,8 +194,13 @@ class ScanMatcher:
         if scan_xy.shape[0] < c.min_points:
             return MatchResult(prior, np.eye(3), False, "too few points")
         half_xy, half_deg = self._window(prior_covariance)
-        centre, covariance, edges = self._coarse_match(field, scan_xy, prior,
-                                                       _grid(half_xy, c.coarse_xy_m, half_deg, c.coarse_theta_deg))
+        coarse = _grid(half_xy, c.coarse_xy_m, half_deg, c.coarse_theta_deg)
+        scores = _search(field, scan_xy, prior, *coarse)
+        best = np.unravel_index(int(np.argmax(scores)), scores.shape)
+        weights = self._weights(scores, scan_xy.shape[0])
+        edges = _edge_marginals(weights)
+        covariance = _uninformative_along(self._covariance(weights, coarse), edges.min(axis=1) >= c.flat_edge)
+        centre = _offset_pose(prior, coarse[0][best[0]], coarse[1][best[1]], coarse[2][best[2]])
         fine = _grid(c.coarse_xy_m, c.fine_xy_m, c.coarse_theta_deg, c.fine_theta_deg)  # one coarse cell round
         fine_scores = _search(field, scan_xy, centre, *fine)
         fb = np.unravel_index(int(np.argmax(fine_scores)), fine_scores.shape)
@@ -209,37 +212,6 @@ class ScanMatcher:
         elif np.any(np.abs(edges[:, 1] - edges[:, 0]) > c.max_edge_imbalance):
             reason = "the likelihood rises toward an edge of the search window"  # the true pose may lie beyond
         return MatchResult(pose, covariance, not reason, reason)
-
-    def _coarse_match(self, field: LikelihoodField, scan_xy: np.ndarray, prior: Pose2D,
-                      coarse: tuple[np.ndarray, ...]) -> tuple[Pose2D, np.ndarray, np.ndarray]:
-        """The best pose of the coarse grid, the match's covariance and the window's edge marginals.
-
-        A slanted ridge of equal fits meets the x and y edges anywhere: it is judged on a grid turned
-        along it, where its ends lie on one axis's edges (as a wall parallel to the room's do)."""
-        scores, weights, edges = self._coarse(field, scan_xy, prior, coarse, 0.0)
-        angle = _ridge_angle(self._covariance(weights, coarse)) if self._reaches_edge(edges[:2]) else 0.0
-        if angle:
-            scores, weights, edges = self._coarse(field, scan_xy, prior, coarse, angle)
-        best = np.unravel_index(int(np.argmax(scores)), scores.shape)
-        flat = edges.min(axis=1) >= self.config.flat_edge
-        covariance = _turned(_uninformative_along(self._covariance(weights, coarse), flat), angle)
-        return (_offset_pose(prior, *_turned_xy(coarse[0][best[0]], coarse[1][best[1]], angle), coarse[2][best[2]]),
-                covariance, edges)
-
-    def _coarse(self, field: LikelihoodField, scan_xy: np.ndarray, prior: Pose2D, grid: tuple[np.ndarray, ...],
-                angle: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Scores, normalised likelihoods and edge marginals of the coarse grid, its position axes
-        turned by ``angle``."""
-        scores = _search(field, scan_xy, prior, *grid, angle)
-        weights = self._weights(scores, scan_xy.shape[0])
-        return scores, weights, _edge_marginals(weights)
-
-    def _reaches_edge(self, position_edges: np.ndarray) -> bool:
-        """Does the likelihood reach an x or y edge of the window (a ridge of equal fits, or an
-        optimum beyond)?"""
-        c = self.config
-        return bool(np.any(position_edges.min(axis=1) >= c.flat_edge)
-                    or np.any(np.abs(position_edges[:, 1] - position_edges[:, 0]) > c.max_edge_imbalance))
 
     def _window(self, prior_covariance: np.ndarray | None) -> tuple[float, float]:
         c = self.config
@@ -301,26 +273,6 @@ def _uninformative_along(covariance: np.ndarray, axes: np.ndarray) -> np.ndarray
     return out
 
 
-def _ridge_angle(covariance: np.ndarray) -> float:
-    """The direction of the position covariance's major axis, within ±45° (the grid is square);
-    0 when it lies on an axis."""
-    _, vectors = np.linalg.eigh(covariance[:2, :2])
-    angle = (math.atan2(vectors[1, 1], vectors[0, 1]) + math.pi / 4) % (math.pi / 2) - math.pi / 4
-    return angle if abs(angle) > _ALIGNED_RAD else 0.0
-
-
-def _turned(covariance: np.ndarray, angle: float) -> np.ndarray:
-    """An (x, y, heading) covariance on axes turned by ``angle``, in world axes."""
-    c, s = math.cos(angle), math.sin(angle)
-    r = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return r @ covariance @ r.T
-
-
-def _turned_xy(dx: float, dy: float, angle: float) -> tuple[float, float]:
-    c, s = math.cos(angle), math.sin(angle)
-    return c * dx - s * dy, s * dx + c * dy
-
-
 def _grid(half_xy: float, step_xy: float, half_deg: float, step_deg: float) -> tuple[np.ndarray, ...]:
     n_xy, n_t = int(round(half_xy / step_xy)), int(round(half_deg / step_deg))
     xy = np.arange(-n_xy, n_xy + 1) * step_xy
@@ -337,11 +289,10 @@ def _to_world(scan_xy: np.ndarray, pose: Pose2D) -> np.ndarray:
 
 
 def _search(field: LikelihoodField, scan_xy: np.ndarray, pose: Pose2D, dxs: np.ndarray, dys: np.ndarray,
-            dthetas: np.ndarray, angle: float = 0.0) -> np.ndarray:
-    """Summed log-likelihood for every (dx, dy, dθ) offset of ``pose``, (dx, dy) on axes turned by
-    ``angle``: shape (len dxs, len dys, len dθ)."""
+            dthetas: np.ndarray) -> np.ndarray:
+    """Summed log-likelihood for every (dx, dy, dθ) offset of ``pose``: shape (len dxs, len dys, len dθ)."""
     return _search_kernel(field.values, field.resolution_m, field.pad_cells, np.ascontiguousarray(scan_xy),
-                          pose.x_m, pose.y_m, pose.heading_rad, dxs, dys, dthetas, math.cos(angle), math.sin(angle))
+                          pose.x_m, pose.y_m, pose.heading_rad, dxs, dys, dthetas)
 
 
 @numba.njit(cache=True)
@@ -366,7 +317,7 @@ def _bilinear_many(values, res, pad, xy):
 
 
 @numba.njit(cache=True, parallel=True)
-def _search_kernel(values, res, pad, scan, x0, y0, h0, dxs, dys, dthetas, ca, sa):
+def _search_kernel(values, res, pad, scan, x0, y0, h0, dxs, dys, dthetas):
     out = np.empty((dxs.shape[0], dys.shape[0], dthetas.shape[0]))
     n = scan.shape[0]
     for t in numba.prange(dthetas.shape[0]):
@@ -378,10 +329,9 @@ def _search_kernel(values, res, pad, scan, x0, y0, h0, dxs, dys, dthetas, ca, sa
             wy[k] = y0 + s * scan[k, 0] + c * scan[k, 1]
         for a in range(dxs.shape[0]):
             for b in range(dys.shape[0]):
-                ox, oy = ca * dxs[a] - sa * dys[b], sa * dxs[a] + ca * dys[b]
                 total = 0.0
                 for k in range(n):
-                    total += _bilinear(values, res, pad, wx[k] + ox, wy[k] + oy)
+                    total += _bilinear(values, res, pad, wx[k] + dxs[a], wy[k] + dys[b])
                 out[a, b, t] = total
     return out
 
