@@ -135,14 +135,11 @@ def shortest_path(floor_map: FloorMap, start_xy: Point, goal_xy: Point) -> list[
     dist = np.full(blocked.shape, np.inf)
     if not _dijkstra(blocked, start[0], start[1], 0.0, goal[0], goal[1], dist, parent):
         return None
-    # from the robot itself (if it stood blocked, its first hop leaves the obstacle) through the cells'
-    # centres, the goal's included: a goal on its cell's corner may not be in sight of the cell before
-    # (the line grazes a blocked neighbour), and string pulling drops the centres it does not need
-    inner = [cell_center(floor_map, c) for c in _backtrack(parent, goal, blocked.shape[1])]
-    if inner[0] == start_xy:  # a start or goal on its cell's centre is not listed twice
+    # from the robot itself (if it stood blocked, its first hop leaves the obstacle) through the
+    # centres of the cells before the goal's; a start on its cell's centre is not listed twice
+    inner = [cell_center(floor_map, c) for c in _backtrack(parent, goal, blocked.shape[1])[:-1]]
+    if inner and inner[0] == start_xy:
         inner = inner[1:]
-    if inner and inner[-1] == goal_xy:
-        inner = inner[:-1]
     return _shortcut(floor_map, [start_xy, *inner, goal_xy])
 
 
@@ -232,7 +229,9 @@ def _segment_free(blocked, x0, y0, x1, y1):
     for _ in range(abs(i1 - i) + abs(j1 - j) + 2):
         if i < 0 or i >= nx or j < 0 or j >= ny or blocked[i, j]:
             return False
-        if (i == i1 and j == j1) or min(ti, tj) >= 1.0:  # in the last cell (or on its boundary)
+        # in the last cell, or on its boundary: a segment that ends on a corner does not pass through
+        # it, though round-off may put its end a hair past (0.95 / 0.05 is 18.999999999999996)
+        if (i == i1 and j == j1) or min(ti, tj) >= 1.0 - 1e-9:
             return 0 <= i1 < nx and 0 <= j1 < ny and not blocked[i1, j1]
         if abs(ti - tj) < 1e-9:  # through a corner: the two side cells count as touched
             if (0 <= i + si < nx and blocked[i + si, j]) or (0 <= j + sj < ny and blocked[i, j + sj]):
