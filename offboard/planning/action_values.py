@@ -105,10 +105,11 @@ class ActionGeometry:
         self.distance_bin = np.empty((rows, n_blk), np.int16)
         self.facing_bin = np.empty((rows, n_blk, n_fac), np.int8)
         self.off_axis_bin = np.empty((rows, n_blk, n_set), np.int8)
+        _check_bins_fit(table, self.distance_bin, self.off_axis_bin, self.facing_bin)
         near, far = table.range_m
         self._view = np.array([bins.el_min_rad, bins.el_max_rad, near, far,
                                math.tan(intrinsics.hfov_rad / 2), math.tan(intrinsics.vfov_rad / 2)])
-        self._bin_counts = (bins.el_count, bins.az_count)
+        self.bin_counts = (bins.el_count, bins.az_count)  # the sensed spheres evaluated with it must share them
         self._rotations = np.ascontiguousarray(settings.rotations(mount))
         facings = belief.facing_azimuths_rad
         self._facing_xy = np.column_stack([np.cos(facings), np.sin(facings)])  # NaN: faces the camera
@@ -129,9 +130,21 @@ class ActionGeometry:
             return
         self.positions_m[rows] = positions_m
         t = self.table
-        _geometry(self._blocks_m, self.cameras_m(rows), rows, self._view, *self._bin_counts, self._rotations, t.distance_edges_m,
+        _geometry(self._blocks_m, self.cameras_m(rows), rows, self._view, *self.bin_counts, self._rotations, t.distance_edges_m,
                   *self._cos_edges, self._facing_xy, self.distance_m, self.sphere_bin, self.distance_bin,
                   self.facing_bin, self.off_axis_bin)
+
+
+def _check_bins_fit(table: DetectabilityTable, distance_bin: np.ndarray, off_axis_bin: np.ndarray,
+                    facing_bin: np.ndarray) -> None:
+    """Refuse a table with more bins than the geometry's small integers hold (kept small: a cache
+    holds hundreds of rows); a bin index past them would wrap to a negative one, read as out of view."""
+    for name, count, bins in (("distance", table.rate.shape[0], distance_bin),
+                              ("off-axis", table.rate.shape[1], off_axis_bin),
+                              ("facing", table.rate.shape[2], facing_bin)):
+        if count - 1 > np.iinfo(bins.dtype).max:
+            raise ValueError(f"the detectability table's {count} {name} bins do not fit the planner's "
+                             f"{bins.dtype} bin indices (at most {np.iinfo(bins.dtype).max + 1})")
 
 
 class GeometryCache:
@@ -195,6 +208,7 @@ def evaluate(geometry: ActionGeometry, rows: np.ndarray, belief: TargetBelief, s
     occlusion is read from ``spheres.toward_m`` (cast toward their centres, in that order) instead."""
     mass = np.ascontiguousarray(belief.coarse_mass().reshape(-1, belief.facing_sectors))
     rows = np.asarray(rows, np.int64)
+    _check_inputs(geometry, rows, mass, spheres, heavy)
     radius = spheres.radius_m.reshape(len(rows), -1)
     slot = np.full(len(mass), -1, np.int32)
     if heavy is not None:
@@ -205,6 +219,23 @@ def evaluate(geometry: ActionGeometry, rows: np.ndarray, belief: TargetBelief, s
                                  slot, np.ascontiguousarray(spheres.toward_m, np.float64),
                                  geometry.block_margin_m + behind_surface_m + spheres.resolution_m, rate)
     return ActionValues(detection, covering)
+
+
+def _check_inputs(geometry: ActionGeometry, rows: np.ndarray, mass: np.ndarray, spheres: SensedSpheres,
+                  heavy: np.ndarray | None) -> None:
+    """Refuse inputs that do not match the rows: the kernel does not check its indices and would
+    read past its arrays, into wrong sums."""
+    capacity, blocks, sectors = geometry.facing_bin.shape
+    if rows.ndim != 1 or (len(rows) and (rows.min() < 0 or rows.max() >= capacity)):
+        raise ValueError(f"rows must be a list of the geometry's {capacity} rows, not {rows}")
+    if mass.shape != (blocks, sectors):
+        raise ValueError(f"the belief's blocks and facings {mass.shape} are not the geometry's {(blocks, sectors)}")
+    if spheres.radius_m.shape != (len(rows), *geometry.bin_counts):
+        raise ValueError(f"spheres.radius_m has shape {spheres.radius_m.shape}, not one sphere per row "
+                         f"{(len(rows), *geometry.bin_counts)}")
+    if heavy is not None and np.shape(spheres.toward_m) != (len(rows), len(heavy)):
+        raise ValueError(f"spheres.toward_m has shape {np.shape(spheres.toward_m)}, not one radius per row "
+                         f"and heavy block {(len(rows), len(heavy))}")
 
 
 @numba.njit(cache=True, parallel=True)

@@ -35,6 +35,12 @@ class TimeModel:
     processing_s: float = 0.5  # stereo, detection, map and belief update, planning (measured at run time)
     drive_s_per_m: float = 0.0  # time per metre of a move (measured at run time); 0: one straight drive
 
+    def __post_init__(self) -> None:
+        for name in ("processing_s", "drive_s_per_m"):  # negative would make a look or a metre take less than nothing
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite time of at least 0 s, not {value}")
+
     @property
     def image_s(self) -> float:
         return self.camera.capture_s + self.processing_s
@@ -62,6 +68,8 @@ class TimeModel:
     def travel_s(self, path_length_m, turn_rad):
         """Drive a path of this length after turning towards it; inf for no path (numbers or arrays)."""
         length = np.asarray(path_length_m, np.float64)
+        if np.any(bad := np.isnan(length) | (length < 0)):
+            raise ValueError(f"path_length_m must be at least 0 m (inf: no path), not {length[bad].flat[0]}")
         reachable = np.isfinite(length)
         length = np.where(reachable, length, 0.0)
         drive = length * self.drive_s_per_m if self.drive_s_per_m > 0 else self.base.drive_time_s(length)

@@ -400,3 +400,47 @@ def test_a_block_below_the_lowest_elevation_any_tilt_sees_has_no_sphere_bin():
     elevation = np.arcsin(offset[:, 2] / np.linalg.norm(offset, axis=1))
     in_reach = (geometry.distance_m[0] > 0) & (geometry.sphere_bin[0] >= 0)
     assert in_reach.any() and (elevation[in_reach] >= bins.el_min_rad).all()
+
+
+def test_a_measured_time_that_is_negative_or_nan_is_refused_and_the_model_kept():
+    planner = _planner(3)
+    with pytest.raises(ValueError, match="processing_s"):
+        planner.set_processing_s(-0.2)
+    with pytest.raises(ValueError, match="drive_s_per_m"):
+        planner.set_drive_s_per_m(float("nan"))
+    assert planner.time_model == TIME
+
+
+def test_a_viewpoint_stands_midway_through_the_detectors_good_distances():
+    from offboard.planning.viewpoints import best_distance_m
+
+    # head-on within 5 % of the best rate from 0.5 to 1.5 m (bins of 0.25 m)
+    assert best_distance_m(DetectabilityTable.nominal()) == 1.0
+
+
+def _aimed(blocks, facings, mass, count, distance_m=1.0, margin_m=0.3, lattice_m=0.25) -> np.ndarray:
+    from offboard.planning.viewpoints import AimedViewpoints
+
+    return AimedViewpoints(np.array(blocks, float), np.array(facings, float), distance_m, MOUNT.height_m,
+                           (6.0, 4.0, 2.5), margin_m, lattice_m).propose(np.array(mass, float), count)
+
+
+def test_a_viewpoint_on_a_block_above_the_head_stands_nearer_by_the_rise():
+    # 1.5 m to a block 1 m above the head: 1.12 m along the floor, on the lattice 1 m (1.5 m without the rise)
+    points = _aimed([(2.0, 2.0, MOUNT.height_m + 1.0)], [0.0], [[1.0]], 1, distance_m=1.5)
+    np.testing.assert_allclose(points, [(3.0, 2.0)])
+
+
+def test_no_viewpoint_is_proposed_within_the_margin_of_a_wall():
+    # the votes land 0.2 m from the west and the east wall
+    blocks = [(1.2, 2.0, MOUNT.height_m), (4.8, 2.0, MOUNT.height_m)]
+    mass = [[1.0, 0.0], [0.0, 1.0]]  # the first faces west, the second east
+    assert _aimed(blocks, [math.pi, 0.0], mass, 2, margin_m=0.3, lattice_m=0.1).shape == (0, 2)
+    near_walls = _aimed(blocks, [math.pi, 0.0], mass, 2, margin_m=0.15, lattice_m=0.1)
+    np.testing.assert_allclose(sorted(near_walls[:, 0]), [0.2, 5.8])
+
+
+def test_viewpoints_on_neighbouring_lattice_nodes_are_not_both_proposed():
+    # votes on three nodes in a row, 0.25 m apart: the middle one neighbours the strongest
+    blocks = [(2.0, 2.0, MOUNT.height_m), (2.0, 2.25, MOUNT.height_m), (2.0, 2.5, MOUNT.height_m)]
+    np.testing.assert_allclose(_aimed(blocks, [0.0], [[0.5], [0.3], [0.2]], 3), [(3.0, 2.0), (3.0, 2.5)])
