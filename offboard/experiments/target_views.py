@@ -29,7 +29,7 @@ import numpy as np
 
 from offboard.experiments.calibration import MIN_LOOKS, Look, cell
 from offboard.experiments.world_facts import Truth, detector_table, load_facts, parse_placement, segments_hit_box
-from offboard.perception.detectability import DetectabilityTable, facing_angle_deg
+from offboard.perception.detectability import DetectabilityTable, facing_angle_deg, off_axis_deg
 from offboard.perception.detection.detector import detector_names
 from shared.geometry import HeadMount, Intrinsics, Pose2D
 
@@ -75,7 +75,7 @@ def _face_view(truth: Truth, normal: np.ndarray, camera, table: DetectabilityTab
         return None
     ray = points[0] - eye
     distance = float(np.linalg.norm(ray))
-    off_axis = math.degrees(math.acos(np.clip(ray @ camera.rotation[:, 2] / distance, -1.0, 1.0)))
+    off_axis = off_axis_deg(camera, points[0])
     facing = float(facing_angle_deg(math.atan2(ray[1], ray[0]), math.atan2(normal[1], normal[0]),
                                     math.asin(np.clip(ray[2] / distance, -1.0, 1.0))))
     rate = float(table.lookup(np.array([distance]), np.array([off_axis]), np.array([facing]))[0])

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from offboard.perception.detectability import DetectabilityTable
+from offboard.perception.detectability import DetectabilityTable, off_axis_deg
 from offboard.perception.detection.detector import Detector
 from offboard.robot.robot_client import CommandError, RobotClient
 from shared.geometry import HeadMount, Intrinsics, Pose2D, wrap_angle
@@ -237,9 +237,7 @@ def _looking_away(rng: np.random.Generator, face_center: np.ndarray, intrinsics:
         pose = Pose2D(rng.uniform(0.5, ROOM_M[0] - 0.5), rng.uniform(0.5, ROOM_M[1] - 0.5),
                       rng.uniform(-math.pi, math.pi))
         camera = mount.camera_in_world(pose, 0.0, 0.0)
-        ray = face_center - camera.translation
-        off_axis = math.acos(np.clip(ray @ camera.rotation[:, 2] / np.linalg.norm(ray), -1.0, 1.0))
-        if off_axis > intrinsics.hfov_rad / 2 + math.radians(25):
+        if off_axis_deg(camera, face_center) > math.degrees(intrinsics.hfov_rad / 2) + 25:
             return pose
 
 

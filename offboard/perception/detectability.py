@@ -22,6 +22,8 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from shared.geometry import RigidTransform
+
 
 @dataclass(frozen=True)
 class DetectabilityTable:
@@ -124,6 +126,13 @@ class DetectabilityTable:
 def face_size_m(width_m: float, height_m: float) -> float:
     """One size for a pictured face, √(width × height): what a detectability table scales with."""
     return math.sqrt(width_m * height_m)
+
+
+def off_axis_deg(camera_in_world: RigidTransform, point_m: np.ndarray) -> float:
+    """Angle (°) between a camera's optical axis (its z) and the ray from it to ``point_m``: the
+    table's second axis."""
+    ray = np.asarray(point_m, float) - camera_in_world.translation
+    return math.degrees(math.acos(np.clip(ray @ camera_in_world.rotation[:, 2] / np.linalg.norm(ray), -1.0, 1.0)))
 
 
 def facing_angle_deg(view_azimuth_rad: np.ndarray, facing_azimuth_rad: np.ndarray,
