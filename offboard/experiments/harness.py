@@ -427,6 +427,7 @@ def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Worker
 
 
 SETTINGS_FILE = "sweep.json"  # in --out: the settings its rows ran with, beside results.csv
+CODE_KEY = "code"  # in sweep.json: every version of the code its rows ran on, oldest first
 
 
 def run_settings(settings: SweepSettings) -> dict:
@@ -466,9 +467,6 @@ def _checked_settings(settings: SweepSettings) -> dict:
     elif (settings.out / "results.csv").is_file():
         log.warning("%s has no %s: its runs are taken to have these settings", settings.out, SETTINGS_FILE)
     return {**now, CODE_KEY: codes if current in codes else [*codes, current]}
-
-
-CODE_KEY = "code"  # in sweep.json: every version of the code its rows ran on, oldest first
 
 
 def code_version() -> str:
