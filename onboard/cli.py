@@ -106,7 +106,7 @@ def run_agent(argv: list[str]) -> int:
     route_zenoh_log()  # refused TLS peers and access-control drops: only Zenoh sees them
     warn_if_exposed(zenoh_config)
     try:
-        session = transport.open()
+        session = transport.open(zenoh_config)  # the config warn_if_exposed judged
     except Exception as exc:  # zenoh.ZError: the agent would have closed the devices; it never ran
         robot.devices.close()
         log.error("cannot open the Zenoh session: %s", exc)

@@ -82,10 +82,12 @@ class TransportConfig:
                     "connect/endpoints": list(self.connect) or None, "listen/endpoints": list(self.listen) or None}
         return {key: value for key, value in settings.items() if value is not None}
 
-    def open(self) -> zenoh.Session:
+    def open(self, config: zenoh.Config | None = None) -> zenoh.Session:
+        """A session on ``config`` where the caller has built (and checked) it already, so that the session
+        runs on what was checked and not on a second reading of a file that may have changed since."""
         log.info("opening Zenoh session: mode=%s connect=%s listen=%s scouting=%s",
                  self.mode, list(self.connect), list(self.listen), self.multicast_scouting)
-        return zenoh.open(self.zenoh())
+        return zenoh.open(self.zenoh() if config is None else config)
 
 
 def add_transport_args(parser: argparse.ArgumentParser) -> None:

@@ -92,3 +92,22 @@ def test_a_malformed_zenoh_config_file_is_named(tmp_path):
     with pytest.raises(ValueError, match="is not a Zenoh configuration") as refused:
         TransportConfig(zenoh_config=path).zenoh()
     assert str(path) in str(refused.value)
+
+
+
+def test_a_session_opens_on_the_config_it_was_given_without_reading_the_file_again(tmp_path):
+    import socket
+
+    with socket.socket() as probe:  # a free port, for the file to name
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    path = tmp_path / "zenoh.json5"
+    path.write_text(f'{{ listen: {{ endpoints: ["tcp/127.0.0.1:{port}"] }}, scouting: {{ multicast: {{ enabled: false }} }} }}')
+    transport = TransportConfig(zenoh_config=path)
+    config = transport.zenoh()
+    path.unlink()  # what the agent checked is what it runs on, even if the file changes after
+    session = transport.open(config)
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=2).close()  # it listens where the file said
+    finally:
+        session.close()
