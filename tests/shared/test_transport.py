@@ -94,7 +94,6 @@ def test_a_malformed_zenoh_config_file_is_named(tmp_path):
     assert str(path) in str(refused.value)
 
 
-
 def test_a_session_opens_on_the_config_it_was_given_without_reading_the_file_again(tmp_path):
     import socket
 
