@@ -344,10 +344,10 @@ def test_a_sigterm_that_lands_on_another_thread_still_stops_the_agent(tmp_path):
 
 def test_a_slow_move_in_real_time_is_waited_for_and_an_absurd_one_refused_by_name(tmp_path):
     with running_agent(tmp_path, "--realtime") as (_, robot):
-        # 0.3 m at 0.015 m/s takes 20 s; the client once allowed twice what the default speed needs and 10 s
-        # (14 s) and gave up on a robot still driving
-        result = robot.move(distance_m=0.3, speed_m_s=0.015)
-        assert result.status == "done" and result.distance_m == pytest.approx(0.3, abs=0.01)
+        # 0.1 m at 0.007 m/s takes 14.3 s; the client once allowed twice what the default speed needs and 10 s
+        # (12.3 s) and gave up on a robot still driving
+        result = robot.move(distance_m=0.1, speed_m_s=0.007)
+        assert result.status == "done" and result.distance_m == pytest.approx(0.1, abs=0.01)
         for absurd in (math.inf, math.nan):
             with pytest.raises(CommandError, match="distance_m"):
                 robot.move(distance_m=absurd)
