@@ -26,6 +26,7 @@ from offboard.search import checkpoint
 from offboard.search.checkpoint import CheckpointError
 from offboard.search.loop import SearchConfig, SearchState
 from offboard.search.run import SearchRequest, dynamic_priors
+from offboard.search.top_view import LookTrace
 from onboard.sim.textures import load_picture
 from shared.geometry import Pose2D
 from shared.launch import onboard_agent
@@ -122,9 +123,15 @@ def test_the_pose_tracker_comes_back_with_its_correction():
 
 
 def test_the_search_history_comes_back_as_it_was_views_included():
-    state = SearchState(actions=3, positions=[(1.0, 2.0)], unreachable=[(2.5, 2.0)], taken={4, 1}, retaken={4},
-                        views=[(1.0, 2.0, 1), (3.5, 0.5, 7)], motion_s=12.5)
-    assert checkpoint.state_from_plain(json.loads(json.dumps(checkpoint.state_plain(state)))) == state
+    state = SearchState(actions=3, positions=[(1.0, 2.0)], trail=[(0.5, 0.5), (1.0, 2.0)],
+                        unreachable=[(2.5, 2.0)], taken={4, 1}, retaken={4},
+                        views=[(1.0, 2.0, 1), (3.5, 0.5, 7)], motion_s=12.5,
+                        looks=[LookTrace(1.0, 2.0, 0.7, 30.0, 4.5, False)], estimate_m=np.array([3.0, 4.0, 0.8]))
+    back = checkpoint.state_from_plain(json.loads(json.dumps(checkpoint.state_plain(state))))
+    assert back.looks == state.looks and back.trail == state.trail and back.positions == state.positions
+    assert isinstance(back.estimate_m, np.ndarray) and np.array_equal(back.estimate_m, state.estimate_m)
+    state.estimate_m = back.estimate_m = None  # an array has no single truth for the dataclass's ==
+    assert back == state
 
 
 def test_the_request_comes_back_with_absolute_paths(tmp_path, monkeypatch):
