@@ -289,7 +289,10 @@ def test_cost_1_moves_carry_their_setting_and_never_to_where_the_robot_stands():
     planner = _planner(1)
     d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), _paths(planner, START))
     assert d.kind == "move" and 0 <= d.setting < len(planner.settings)
-    assert d.find_prob == pytest.approx(d.values.find_prob[:-1].max())
+    j = np.flatnonzero(np.all(planner.positions == d.position_m, axis=1))[0]
+    assert d.find_prob == pytest.approx(d.values.find_prob[:-1].max()) == d.values.find_prob[j, d.setting]
+    assert d.azimuth_rad == planner.settings.azimuth_rad[d.setting]
+    assert d.tilt_rad == planner.settings.tilt_rad[d.setting]
     # B is seen better from the candidate (2, 1), 0.3 m away, than from here: that one is "here", not a move
     planner = _planner(1, boxes=(replace(B_BOX, weight=1.0),))
     near_vertex = Pose2D(1.7, 1.0, 0.0)
