@@ -339,6 +339,20 @@ def test_the_checks_agree_with_the_report_and_notice_a_contradiction():
     assert "Not checked" in empty and "cost 4 with `tables`" in empty and "**cannot tell**" not in empty
 
 
+@pytest.mark.parametrize("index, prior, metric, cost, value", [
+    (0, "tables", "actions", 4, 9.0),  # one cell of twelve slower with knowledge
+    (1, "uniform", "actions", 1, 20.0),  # one cost needs twice the actions
+    (2, "uniform", "distance_m", 2, 30.0),  # one two-stage cost drives further than cost 1
+    (3, "tables", "time_min", 4, 6.0),  # cost 4 slower than cost 2 with knowledge
+    (4, "uniform", "distance_m", 3, 3.0),  # a cell without knowledge drives less than knowledge with cost 3
+    (5, "tables", "actions", 4, 5.6),  # cost 4 needs more actions than cost 2 with knowledge
+])
+def test_each_check_notices_one_cell_that_contradicts_it(index, prior, metric, cost, value):
+    tables = {p: {m: list(v) for m, v in t.items()} for p, t in REPORT.items()}
+    tables[prior][metric][cost - 1] = value
+    assert conclusions(tables)[index].agrees is False
+
+
 # --- the baselines ---------------------------------------------------------------------------------
 
 ROOM = VoxelGrid((6.0, 4.0, 2.5), 0.05)
