@@ -80,7 +80,11 @@ def last_seen(grid: VoxelGrid, position_m: np.ndarray, elapsed_s: float, sigma0_
               spread_m_per_s: float = 0.01) -> np.ndarray:
     """Type 5: a Gaussian around where the target was last known, wider the longer ago."""
     sigma = sigma0_m + spread_m_per_s * max(elapsed_s, 0.0)
-    return np.exp(-0.5 * grid.squared_distances(position_m) / sigma**2)
+    weights = np.exp(-0.5 * grid.squared_distances(position_m) / sigma**2)
+    if not weights.any():  # a units slip, say: alone it would leave nothing inside the room, mixed it would vanish
+        raise ValueError(f"last seen at {tuple(float(v) for v in position_m)}, so far outside the room (spread "
+                         f"{sigma:.2g} m) that no cube holds any of it")
+    return weights
 
 
 def combine(grid: VoxelGrid, weighted: list[tuple[float, np.ndarray]]) -> np.ndarray:

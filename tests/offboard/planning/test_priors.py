@@ -108,3 +108,13 @@ def test_a_broken_hints_file_is_named_once(tmp_path):
     with pytest.raises(ConfigError) as err:
         build_prior(VoxelGrid((2.0, 2.0, 1.0), 0.05), [f"hints:{path}"])
     assert str(err.value).count(str(path)) == 1 and "hint[0].weight: out of range" in str(err.value)
+
+
+@pytest.mark.parametrize("others", [[], ["uniform"]])
+def test_a_last_seen_point_no_cube_is_near_is_refused_naming_it(others):
+    """Centimetres for metres: alone the prior put everything outside the room, mixed it vanished."""
+    grid = VoxelGrid((4.0, 3.0, 2.5), 0.05)
+    with pytest.raises(ConfigError, match=r"--prior: last seen at \(250.0, 120.0, 80.0\).*no cube holds any of it"):
+        build_prior(grid, [*others, "last-seen:250,120,80"])
+    near = build_prior(grid, [*others, "last-seen:4.5,1,1"])  # just outside a wall: its tail is inside
+    assert near.sum() == pytest.approx(1.0 + len(others))
