@@ -434,9 +434,16 @@ class Search:
                                          obs.intrinsics)
         self.belief.observe(footprint.cube_index, detection_likelihood(
             grid, footprint.cube_index, footprint.detection_prob, located, alpha))
-        if obs.target_m is None:
-            log.info("%s detection without stereo depth: the belief gathers along its rays", obs.detection.detector)
-        estimate = obs.target_m if obs.target_m is not None else self._most_likely_m()  # rays from two views cross
+        estimate = obs.target_m
+        if estimate is None:
+            # the likeliest cube on its rays (where rays from two views cross), not anywhere in the room,
+            # where a strong prior alone would make any detection a find
+            on_rays = footprint.cube_index[located > 0]
+            log.info("%s detection without stereo depth: the belief gathers along its rays (%d cubes)",
+                     obs.detection.detector, len(on_rays))
+            if not len(on_rays):  # a box no cube centre of the view projects into
+                return False
+            estimate = self._most_likely_m(on_rays)
         near = self.belief.mass_near(estimate, self.config.found_radius_m)
         self.state.estimate_m = estimate
         if near >= self.config.found_prob:
@@ -448,10 +455,12 @@ class Search:
                  self.config.found_prob)
         return False
 
-    def _most_likely_m(self) -> np.ndarray:
-        """Centre of the cube the belief holds most likely to hold the target's centre."""
+    def _most_likely_m(self, cubes: np.ndarray) -> np.ndarray:
+        """Centre of the cube, among ``cubes`` (flat indices), the belief holds most likely to hold the
+        target's centre."""
         p = self.belief.target_prob
-        return self.occupancy.grid.center_of(np.array(np.unravel_index(int(np.argmax(p)), p.shape)))
+        best = cubes[int(np.argmax(p.ravel()[cubes]))]
+        return self.occupancy.grid.center_of(np.array(np.unravel_index(int(best), p.shape)))
 
     def _to_target_centre(self, obs: Observation) -> Observation:
         """The detection locates the pictured face; the target's centre is half its depth behind it,
