@@ -643,8 +643,9 @@ def build_prior(grid: VoxelGrid, specs: list[str]) -> np.ndarray:
                 raise ConfigError(arg, None, str(exc)) from None
         elif kind == "last-seen":
             values = [float(v) for v in arg.split(",")]
+            seconds = values[3] if len(values) > 3 else 0.0
             try:
-                weighted.append((1.0, priors.last_seen(grid, np.array(values[:3]), values[3] if len(values) > 3 else 0.0)))
+                weighted.append((1.0, priors.last_seen(grid, np.array(values[:3]), seconds)))
             except ValueError as exc:
                 raise ConfigError("--prior", spec, str(exc)) from None
     if not weighted:
