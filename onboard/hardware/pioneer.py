@@ -488,14 +488,23 @@ def _send_goodbye(port: serial.SerialBase) -> None:
 
 def probe(port: str, baud: int = 9600, timeout_ms: int = 1000) -> dict:
     """Identify a Pioneer on ``port`` (a device path or a URL) from its SYNC2 reply, without opening
-    a session. ``DeviceFault`` if nothing answers like one."""
+    a session. ``DeviceFault`` if nothing answers like one. STOP first and last: a robot whose session
+    is still open (its agent killed) takes the SYNC0s as PULSEs and drives on with its last command,
+    even when its own replies no longer reach us."""
     config = PioneerConfig(port=port, baud=baud, sync_reply_timeout_ms=timeout_ms, sync_attempts=2)
     try:
         link = serial.serial_for_url(port, baudrate=baud, timeout=0.02, write_timeout=1.0)
     except (serial.SerialException, OSError, ValueError) as exc:
         raise DeviceFault(f"cannot open {port}: {exc}") from None
     try:
+        link.write(arcos.build_packet(Command.STOP))
+        time.sleep(config.command_gap_ms / 1000.0)
         identity = handshake(link, config)
     finally:
+        try:
+            link.write(arcos.build_packet(Command.STOP))
+            link.flush()
+        except (serial.SerialException, OSError):  # the port failed: the handshake's error says so
+            pass
         link.close()
     return {"device": "pioneer", "name": identity.name, "type": identity.type, "subtype": identity.subtype}

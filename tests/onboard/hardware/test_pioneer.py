@@ -80,6 +80,25 @@ def test_probe_of_a_silent_port_is_a_device_fault(emulator):
         probe(emulator.path, timeout_ms=100)
 
 
+def test_probe_leaves_a_robot_whose_agent_died_mid_drive_stopped(emulator, sim_base):
+    """Its session still open and its replies lost, the robot takes the probe's SYNC0s as PULSEs and
+    drove on with its last command until its own watchdog tripped again."""
+    port = serial.serial_for_url(emulator.path, timeout=0.05)
+    for command, arg in ((Command.SYNC0, None), (Command.SYNC1, None), (Command.SYNC2, None), (Command.OPEN, 1),
+                         (Command.ENABLE, 1), (Command.VEL, 300)):
+        port.write(build_packet(command, arg))
+        time.sleep(0.1)
+    port.close()  # the agent killed: no CLOSE
+    emulator.cable.unplug(still_hears=True)
+    assert wait_until(lambda: emulator.snapshot()[1:3] == (True, 0.0), 5.0)  # the firmware's watchdog halted it
+    with pytest.raises(DeviceFault, match="no ARCOS robot answered"):
+        probe(emulator.path, timeout_ms=300)
+    start = sim_base.true_pose
+    time.sleep(0.5)
+    end = sim_base.true_pose
+    assert emulator.snapshot()[2] == 0.0 and math.hypot(end.x_m - start.x_m, end.y_m - start.y_m) < 0.01
+
+
 def test_a_device_answering_sync_with_other_packets_is_given_up_on(tmp_path):
     """Every write gets a CONFIG packet back (0x20), never the SYNC echo: the handshake used to start
     again at SYNC0 within one attempt, for ever; now each restart is an attempt, and probe gives up."""
