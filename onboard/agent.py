@@ -143,6 +143,11 @@ class Agent:
         self._watch = _PlannerWatch()
         self._shutdown = threading.Event()
         self._wake_watchdog = threading.Event()  # a lost planner is acted on at once, not at the next poll
+        # a stop is acted on by the watchdog's thread as it arrives, before it is decoded or queued (the
+        # queue may be full, the dispatcher blocked), and by the dispatcher, which answers it; the lock
+        # keeps the early stop from landing on a move the dispatcher starts after answering
+        self._stop_asked = threading.Event()
+        self._stop_lock = threading.Lock()
         self._declared: list = []
         self._threads: list[threading.Thread] = []
 
@@ -199,6 +204,9 @@ class Agent:
 
     def _enqueuer(self, kind: str) -> Callable[[zenoh.Query], None]:
         def enqueue(query: zenoh.Query) -> None:
+            if kind == "stop":  # whatever its payload: any word on the stop key stops the robot
+                self._stop_asked.set()
+                self._wake_watchdog.set()
             try:
                 self._commands.put_nowait((kind, query))
             except queue.Full:
@@ -313,7 +321,10 @@ class Agent:
         return turn_rad, distance_m
 
     def _on_stop(self, query: zenoh.Query, cmd: m.StopCommand) -> None:
-        if failed := self._stop_all("stop command"):
+        with self._stop_lock:
+            self._stop_asked.clear()
+            failed = self._stop_all("stop command")
+        if failed:
             raise CommandRefused("device", "; ".join(failed))
         deadline = time.monotonic() + 2.0
         while self.devices.base.reading().moving and time.monotonic() < deadline:
@@ -420,6 +431,11 @@ class Agent:
             self._wake_watchdog.wait(wait_s)
             self._wake_watchdog.clear()
             wait_s = _WATCHDOG_POLL_S
+            with self._stop_lock:
+                if self._stop_asked.is_set():
+                    self._stop_asked.clear()
+                    self._stop_all("stop asked")
+                    continue
             try:
                 if not self.devices.base.reading().moving:
                     continue

@@ -305,6 +305,22 @@ def test_a_second_motion_while_moving_is_refused_and_stop_interrupts(tmp_path, b
         assert results and results[0].status == "stopped" and results[0].distance_m < 1.0
 
 
+def test_a_stop_that_cannot_be_read_still_stops_the_robot(tmp_path, box_world):
+    """A stop was decoded, and queued behind every other command, before it stopped anything: a
+    malformed one, or one that found the queue full, left the robot driving."""
+    with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):
+        results = []
+        mover = threading.Thread(target=lambda: results.append(robot.move(distance_m=4.0, speed_m_s=0.3)))
+        mover.start()
+        assert wait_until(lambda: robot.state().base_moving, 5.0)
+        with client_transport(agent).open() as session:
+            reply = _raw_get(session, RobotKeys("syt").stop, b"\x00not a stop")
+        assert reply.err is not None  # answered as malformed ...
+        mover.join(timeout=5.0)
+        assert results and results[0].status == "stopped" and results[0].distance_m < 1.0  # ... and acted on
+    assert "stopping the base: stop asked" in (tmp_path / "onboard.log").read_text()
+
+
 def test_sigterm_stops_the_base_and_exits_cleanly(tmp_path, box_world):
     with running_agent(tmp_path, "--world", str(box_world), *PACED) as (agent, robot):
         results = []
