@@ -251,6 +251,8 @@ class Navigator:
             waypoint, why = self._next_waypoint(run, bug)
             if run.interrupted:
                 return self._result(run, "interrupted", run.interrupted)
+            if waypoint is None and self._verdict(run) is not None:
+                continue  # the look ahead's scan match put the robot at its goal after all
             if waypoint is None and why.startswith("no route") and (self._survey_once(run) or self._probe(run)):
                 continue  # ghosts fade and gaps show: look again before giving up
             if waypoint is None:

@@ -117,6 +117,26 @@ def test_a_goal_inside_an_obstacle_is_unreachable_in_bounded_time(agent):
     assert result.steps <= 12 and result.stalls == 0
 
 
+def test_a_look_whose_match_puts_the_robot_at_its_goal_ends_the_run_reached(agent):
+    """The look toward the motion can correct the pose onto the goal: TangentBug then said "at the
+    goal" and the run ended unreachable, its goal struck off for the rest of the search."""
+    _, robot = agent
+    retry_busy(robot.sim_teleport, 1.5, 2.0, 0.0)
+    navigator = Navigator(robot, OccupancyGrid(VoxelGrid((8.0, 6.0, 2.5), 0.05)))
+    navigator.survey()
+    look = navigator._look
+
+    def look_and_match(*args):  # as an accepted scan match would: 13 cm further on than odometry says
+        frame = look(*args)
+        navigator.tracker = PoseTracker(navigator._odom, world=Pose2D(1.63, 2.0, 0.0))
+        return frame
+
+    navigator._look = look_and_match
+    result = navigator.go_to((1.65, 2.0))
+    assert result.status == "reached", result.reason
+    assert result.distance_m < 0.01  # it had nowhere to drive
+
+
 def test_an_enclosed_goal_is_unreachable(agent):
     _, robot = agent
     result = navigate(robot, (4.8, 4.4, 0.0), (6.5, 4.5))
