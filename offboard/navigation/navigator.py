@@ -43,8 +43,8 @@ from typing import Literal, TypeVar
 
 import numpy as np
 
-from offboard.navigation.grid_planner import (Point, cell_center, distance_field, distances_at, is_free, nearest_free_cell,
-                                   segment_is_free, shortest_path)
+from offboard.navigation.grid_planner import (Point, cell_center, cell_centers, distance_field, distances_at, is_free,
+                                   nearest_free_cell, segment_is_free, shortest_path)
 from offboard.navigation.localization import (MatchConfig, PoseTracker, ScanMatcher, map_field, scan_from_disparity,
                                               structure_in_view)
 from offboard.perception.occupancy import FloorMap, OccupancyGrid
@@ -356,7 +356,7 @@ class Navigator:
         nx, ny = floor.blocked.shape
         if not (0.0 <= run.goal[0] < nx * floor.resolution_m and 0.0 <= run.goal[1] < ny * floor.resolution_m):
             return None, "the goal lies outside the room"
-        target = self._target(floor, run.goal)
+        target = self._target(floor, run.goal, here)
         if target is None or (target != run.goal and math.dist(here, target) <= self.config.goal_tolerance_m):
             return None, f"no route: the goal is blocked (seen from {math.dist(here, run.goal):.1f} m)"
         to_target = distance_field(floor, target)
@@ -390,13 +390,24 @@ class Navigator:
         return BugStep("move", (here[0] + t * (corner[0] - here[0]), here[1] + t * (corner[1] - here[1])), "path")
 
     @staticmethod
-    def _target(floor: FloorMap, goal: Point) -> Point | None:
-        """The goal, or if the map has it blocked the nearest free place: obstacles seen from afar are
-        mapped thick (depth error grows as z²), so a goal is only given up once seen from close by."""
+    def _target(floor: FloorMap, goal: Point, here: Point) -> Point | None:
+        """The goal, or if the map has it blocked the nearest free place reachable from ``here``:
+        obstacles seen from afar are mapped thick (depth error grows as z²), so a goal is only given up
+        once seen from close by. The nearest free place may be shut in (the floor inside a pen, or an
+        object's unseen inside): then the nearest that a path reaches."""
         if is_free(floor, goal):
             return goal
         cell = nearest_free_cell(floor, goal)
-        return None if cell is None else cell_center(floor, cell)
+        if cell is None:
+            return None
+        from_here = distance_field(floor, here)
+        if math.isfinite(from_here[cell]):
+            return cell_center(floor, cell)
+        reachable = cell_centers(floor, np.argwhere(np.isfinite(from_here)))
+        if not len(reachable):
+            return None
+        best = reachable[int(np.argmin(np.hypot(reachable[:, 0] - goal[0], reachable[:, 1] - goal[1])))]
+        return float(best[0]), float(best[1])
 
     def _command(self, command: Callable[..., T], *args: float) -> T:
         """A robot command (:func:`retry_busy`), its wall time booked as waiting, not processing."""

@@ -144,6 +144,15 @@ def test_an_enclosed_goal_is_unreachable(agent):
     assert result.steps <= 12 and result.stalls == 0
 
 
+def test_a_goal_on_a_wall_whose_nearest_free_place_is_shut_in_is_approached_from_outside(agent):
+    """(5.95, 4.5) lies on the pen's west wall, nearest to the free floor inside the pen, which no
+    path reaches: the run was given up where it began, 1.2 m away, not approached from outside."""
+    _, robot = agent
+    result = navigate(robot, (4.8, 4.4, 0.0), (5.95, 4.5))
+    assert result.status == "unreachable" and "blocked" in result.reason, result.reason
+    assert math.dist((result.pose.x_m, result.pose.y_m), (5.95, 4.5)) < 0.6
+
+
 def test_a_stall_marks_the_unseen_obstacle_and_the_robot_goes_round(agent):
     _, robot = agent
     result = navigate(robot, (3.2, 4.3, 0.0), (5.0, 4.3))
