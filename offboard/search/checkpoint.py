@@ -49,7 +49,7 @@ log = logging.getLogger(__name__)
 
 FILE_NAME = "checkpoint.syt"
 MAGIC = b"SYTCKPT\x00"
-VERSION = 3  # 2: the belief's blocked facings; 3: the dynamic priors' memory
+VERSION = 4  # 2: the belief's blocked facings; 3: the dynamic priors' memory; 4: no retaken settings
 ALIGN = 64
 HEADER_KEYS = ("request", "transport", "config", "wall_time_s", "search", "belief", "coded", "grid_shape", "arrays")
 
@@ -266,7 +266,6 @@ _STATE_FIELDS = {
     "estimate_m": lambda v: None if v is None else np.array(v, np.float64),
     "views": lambda v: [tuple(p) for p in v],
     "taken": set,
-    "retaken": set,
 }
 
 

@@ -139,7 +139,6 @@ class SearchState:
     estimate_m: np.ndarray | None = None
     unreachable: list[tuple[float, float]] = field(default_factory=list)  # goals the navigator could not reach
     taken: set[int] = field(default_factory=set)  # settings looked at since the robot last moved
-    retaken: set[int] = field(default_factory=set)  # ... of those, the ones already looked at again to confirm
     views: list[tuple[float, float, int]] = field(default_factory=list)  # (x, y, setting): not taken again there
     motion_s: float = 0.0  # robot clock: driving, slewing, capture
     processing_s: float = 0.0  # wall clock: capture transfer, stereo, detection, mapping, updates, planning
@@ -148,22 +147,17 @@ class SearchState:
     glances: int = 0  # frames the navigator took toward the motion, searched on the way (not looks)
     widened: bool = False  # the planner added its fallback tilts (SearchPlanner.widen)
 
-    def took(self, setting: int, located: bool, at_m: tuple[float, float]) -> None:
+    def took(self, setting: int, at_m: tuple[float, float]) -> None:
         """Book a look at ``setting`` from ``at_m``, where the robot stands: it is not taken again from
-        there, on this stay or a later one (``views``), except once after a ``located`` detection (one
-        with stereo depth), to confirm it. The same image a third time says nothing new, and a weak far
-        detection would be looked at for ever; one without depth needs another view to place it."""
+        there, on this stay or a later one (``views``). A detection too is confirmed only from another
+        view: the same image again (rendered exactly again, or captured again from the same pose) would
+        repeat the detector's answer, right or wrong, and the update would count it as a second one."""
         self.taken.add(setting)
-        if located and setting not in self.retaken:
-            self.taken.discard(setting)
-            self.retaken.add(setting)
-        else:
-            self.views.append((at_m[0], at_m[1], setting))
+        self.views.append((at_m[0], at_m[1], setting))
 
     def moved(self) -> None:
         """Every setting is new again from a new position, except the ``views`` taken near it before."""
         self.taken.clear()
-        self.retaken.clear()
 
 
 class Search:
@@ -345,7 +339,7 @@ class Search:
         obs = self.perception.observe(capture, self.tracker.world_pose(capture.pose.to_pose()), detector)
         self.state.actions += 1
         realised, found = self._interpret(obs, table)
-        self.state.took(decision.setting, located=obs.target_m is not None, at_m=(pose.x_m, pose.y_m))
+        self.state.took(decision.setting, at_m=(pose.x_m, pose.y_m))
         for prior in self.dynamic_priors:  # looks only: a glance repeats much of the last one's view, and
             factor = prior(obs, self)  # saliency multiplies in whatever each image shows
             if factor is not None:

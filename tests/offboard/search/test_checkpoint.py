@@ -25,6 +25,7 @@ from offboard.planning.planner import Decision
 from offboard.search import checkpoint
 from offboard.search.checkpoint import CheckpointError
 from offboard.search.loop import SearchConfig, SearchState
+from offboard.search.top_view import LookTrace
 from offboard.search.run import SearchRequest, dynamic_priors
 from offboard.search.top_view import LookTrace
 from onboard.sim.textures import load_picture
@@ -124,8 +125,7 @@ def test_the_pose_tracker_comes_back_with_its_correction():
 
 def test_the_search_history_comes_back_as_it_was_views_included():
     state = SearchState(actions=3, positions=[(1.0, 2.0)], trail=[(0.5, 0.5), (1.0, 2.0)],
-                        unreachable=[(2.5, 2.0)], taken={4, 1}, retaken={4},
-                        views=[(1.0, 2.0, 1), (3.5, 0.5, 7)], motion_s=12.5,
+                        unreachable=[(2.5, 2.0)], taken={4, 1}, views=[(1.0, 2.0, 1), (3.5, 0.5, 7)], motion_s=12.5,
                         looks=[LookTrace(1.0, 2.0, 0.7, 30.0, 4.5, False)], estimate_m=np.array([3.0, 4.0, 0.8]))
     back = checkpoint.state_from_plain(json.loads(json.dumps(checkpoint.state_plain(state))))
     assert back.looks == state.looks and back.trail == state.trail and back.positions == state.positions

@@ -14,27 +14,16 @@ HERE = (2.0, 3.0)
 
 def test_a_setting_is_taken_once_from_a_position():
     state = SearchState()
-    state.took(3, located=False, at_m=HERE)
+    state.took(3, at_m=HERE)
     assert state.taken == {3} and state.views == [(2.0, 3.0, 3)]
-
-
-def test_a_located_detection_is_confirmed_from_the_same_view_once_and_only_once():
-    state = SearchState()
-    state.took(5, located=True, at_m=HERE)
-    assert 5 not in state.taken and not state.views  # free to look again: a second image confirms it
-    state.took(5, located=True, at_m=HERE)
-    assert 5 in state.taken and state.views == [(2.0, 3.0, 5)]  # a third image would say nothing new
 
 
 def test_moving_makes_every_setting_new_again_but_keeps_the_views_taken_for_when_the_robot_comes_back():
     state = SearchState()
-    state.took(5, located=True, at_m=HERE)
-    state.took(5, located=True, at_m=HERE)
-    state.took(2, located=False, at_m=HERE)
+    state.took(5, at_m=HERE)
+    state.took(2, at_m=HERE)
     state.moved()
     assert not state.taken and state.views == [(2.0, 3.0, 5), (2.0, 3.0, 2)]
-    state.took(5, located=True, at_m=HERE)
-    assert 5 not in state.taken
 
 
 def test_a_glance_repeats_a_view_only_from_the_same_camera_pose_and_direction():
@@ -47,13 +36,13 @@ def test_a_glance_repeats_a_view_only_from_the_same_camera_pose_and_direction():
 
 
 @pytest.mark.integration
-def test_a_move_that_went_nowhere_keeps_a_detection_from_being_confirmed_by_the_same_image(lab_search):
-    """A look with a located detection may be taken once more, to confirm it; a move that ends
-    unreachable without driving once cleared that, so the same view counted again and again."""
+def test_a_move_that_went_nowhere_makes_no_setting_new_again(lab_search):
+    """A move that ends unreachable without driving once cleared the settings taken, so the same view
+    was taken again and counted as new evidence."""
     from offboard.planning.planner import Decision
 
     pose = lab_search._pose()
-    lab_search.state.took(5, located=True, at_m=(pose.x_m, pose.y_m))
+    lab_search.state.took(5, at_m=(pose.x_m, pose.y_m))
     lab_search._move(Decision("move", "a goal inside the wall", position_m=(-5.0, -5.0), setting=0))
     assert lab_search.state.unreachable and lab_search.state.distance_m < 0.05
-    assert 5 in lab_search.state.retaken  # its confirmation is still the one it had
+    assert 5 in lab_search.state.taken
