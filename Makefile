@@ -18,10 +18,12 @@ $(STAMP): pyproject.toml constraints.txt
 demo: $(STAMP)
 	$(VENV)/bin/syt-offboard demo --out demo-out
 
-# --maxschedchunk 1: tests go to the two workers a few at a time, not in blocks of a hundred, so the long
+# -n 3 on 2 cores: many tests wait on real time (agents paced like a robot, Zenoh round trips), and a
+# third worker computes through those waits (session 55, idle, back to back: 4:37 against 5:35 with two).
+# --maxschedchunk 1: tests go to the workers a few at a time, not in blocks of a hundred, so the long
 # tests (collected first, see tests/conftest.py) are shared between them
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2 --maxschedchunk 1 --durations=10
+	$(PY) -m pytest -q -n 3 --maxschedchunk 1 --durations=10
 
 bench: $(STAMP)
 	$(VENV)/bin/syt-onboard bench --json

@@ -29,9 +29,9 @@ RES = 0.05  # the floor maps' cell size in the navigation tests
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The long tests first (a stable sort keeps the rest in order): two workers handed tests a few at
-    a time (``make test``'s ``--maxschedchunk 1``) then share them from the start, instead of one
-    running a whole search alone at the end while the other waits."""
+    """The long tests first (a stable sort keeps the rest in order): the workers, handed tests a few at
+    a time (``make test``'s ``--maxschedchunk 1``), then share them from the start, instead of one
+    running a whole search alone at the end while the others wait."""
     items.sort(key=lambda item: item.get_closest_marker("long") is None)
 
 
