@@ -25,7 +25,6 @@ from offboard.planning.planner import Decision
 from offboard.search import checkpoint
 from offboard.search.checkpoint import CheckpointError
 from offboard.search.loop import SearchConfig, SearchState
-from offboard.search.top_view import LookTrace
 from offboard.search.run import SearchRequest, dynamic_priors
 from offboard.search.top_view import LookTrace
 from onboard.sim.textures import load_picture
