@@ -121,8 +121,8 @@ def target_views(runs: list[Run]) -> tuple[list[ViewedLook], int, int]:
     :data:`RATE_EDGES`), each view of a run once; how many looks had the simulator's pose and the
     head's angles logged; and how many more in view repeated a view their run had already had.
 
-    A repeated view (the same pose and head angles, as when the robot looks again without moving to
-    confirm a detection) is rendered exactly again, so the detector answers as before: it is no new
+    A repeated view (the same pose and head angles, as the oracle's looks from its viewpoint, or SYT's
+    confirming look until session 55) is rendered exactly again, so the detector answers as before: it is no new
     draw, and counting it would weigh a lucky or unlucky view twice."""
     viewed: list[ViewedLook] = []
     logged = repeated = 0
@@ -201,7 +201,7 @@ def target_views_md(looks: list[ViewedLook], logged: int, repeated: int, source:
              f"target's picture was in view (the run's detector's table gives at least {RATE_EDGES[0]:g} from the true camera, "
              "the picture's centre and its corners drawn in by a tenth in the image, nothing in the way). "
              "Each view of a run counts once: "
-             f"{repeated} more looks in view repeated one (the same pose and head angles, mostly to confirm a detection), "
+             f"{repeated} more looks in view repeated one (the same pose and head angles, as the oracle's looks from its viewpoint), "
              "which the simulator renders exactly again, so the detector answered as before. Binned by that table rate: "
              "the share of them on which the detector fired, for all of them and split at each run's first miss in view. "
              "Eq. 4 treats looks as independent draws: if they are, a look after a miss finds the target as often as one "
