@@ -288,17 +288,14 @@ class PioneerBase:
         self._last_write_s = time.monotonic()
 
     def _connect(self) -> tuple[serial.SerialBase, _Session]:
-        """Open the port, STOP, sync, OPEN, stop whatever the robot resumes, ENABLE, set the limits.
-        The first STOP is for a robot whose session is still open, its status lost on the way back:
-        it hears the SYNC0s, which it takes as PULSEs, and would drive on with its last command."""
+        """Open the port, sync (:func:`handshake`, which begins with a STOP), OPEN, stop whatever the
+        robot resumes, ENABLE, set the limits."""
         c = self.config
         try:
             port = serial.serial_for_url(c.port, baudrate=c.baud, timeout=0.02, write_timeout=1.0)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeviceFault(f"Pioneer on {c.port}: cannot open the port: {exc}") from None
         try:
-            port.write(arcos.build_packet(Command.STOP))
-            time.sleep(c.command_gap_ms / 1000.0)
             self.identity = handshake(port, c, self._closing)
             session = _Session(arcos.dist_conv_factor(self.identity.subtype), self._continue_from)
             port.write(arcos.build_packet(Command.OPEN, 1))
@@ -443,7 +440,11 @@ def _wait_for(port: serial.SerialBase, reader: PacketReader, wanted, timeout_s: 
 
 def handshake(port: serial.SerialBase, config: PioneerConfig,
               give_up: threading.Event | None = None) -> RobotIdentity:
-    """SYNC0, SYNC1, SYNC2 with retries; an old session still open is closed first."""
+    """STOP, then SYNC0, SYNC1, SYNC2 with retries; an old session still open is closed first. The
+    STOP is for a robot whose session is still open, its status lost on the way back: it hears the
+    SYNC0s, which it takes as PULSEs, and would drive on with its last command."""
+    port.write(arcos.build_packet(Command.STOP))
+    time.sleep(config.command_gap_ms / 1000.0)
     reader, timeout_s = PacketReader(), config.sync_reply_timeout_ms / 1000.0
     for attempt in range(config.sync_attempts):
         if give_up is not None and give_up.is_set():
@@ -488,17 +489,15 @@ def _send_goodbye(port: serial.SerialBase) -> None:
 
 def probe(port: str, baud: int = 9600, timeout_ms: int = 1000) -> dict:
     """Identify a Pioneer on ``port`` (a device path or a URL) from its SYNC2 reply, without opening
-    a session. ``DeviceFault`` if nothing answers like one. STOP first and last: a robot whose session
-    is still open (its agent killed) takes the SYNC0s as PULSEs and drives on with its last command,
-    even when its own replies no longer reach us."""
+    a session. ``DeviceFault`` if nothing answers like one. The robot is left stopped: the handshake
+    begins with a STOP, and a robot whose agent died with its session open may have been woken by the
+    SYNC0s all the same (it takes them as PULSEs), so one more STOP ends the probe."""
     config = PioneerConfig(port=port, baud=baud, sync_reply_timeout_ms=timeout_ms, sync_attempts=2)
     try:
         link = serial.serial_for_url(port, baudrate=baud, timeout=0.02, write_timeout=1.0)
     except (serial.SerialException, OSError, ValueError) as exc:
         raise DeviceFault(f"cannot open {port}: {exc}") from None
     try:
-        link.write(arcos.build_packet(Command.STOP))
-        time.sleep(config.command_gap_ms / 1000.0)
         identity = handshake(link, config)
     finally:
         try:
