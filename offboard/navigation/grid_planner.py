@@ -58,12 +58,14 @@ def is_free(floor_map: FloorMap, xy: Point) -> bool:
     return 0 <= i < nx and 0 <= j < ny and not floor_map.blocked[i, j]
 
 
-def nearest_free_cell(floor_map: FloorMap, xy: Point) -> tuple[int, int] | None:
-    """The free cell whose centre is closest to ``xy`` (the robot hugging an obstacle starts there)."""
+def nearest_free_cell(floor_map: FloorMap, xy: Point, among: np.ndarray | None = None) -> tuple[int, int] | None:
+    """The free cell whose centre is closest to ``xy`` (the robot hugging an obstacle starts there);
+    ``among``: only cells where this mask (the floor's shape) is true."""
+    allowed = ~floor_map.blocked if among is None else ~floor_map.blocked & among
     cell = cell_of(floor_map, xy)
-    if not floor_map.blocked[cell]:
+    if allowed[cell]:
         return cell
-    free = np.argwhere(~floor_map.blocked)
+    free = np.argwhere(allowed)
     if free.shape[0] == 0:
         return None
     centres = cell_centers(floor_map, free)

@@ -43,8 +43,8 @@ from typing import Literal, TypeVar
 
 import numpy as np
 
-from offboard.navigation.grid_planner import (Point, cell_center, cell_centers, distance_field, distances_at, is_free,
-                                   nearest_free_cell, segment_is_free, shortest_path)
+from offboard.navigation.grid_planner import (Point, cell_center, distance_field, distances_at, is_free, nearest_free_cell,
+                                   segment_is_free, shortest_path)
 from offboard.navigation.localization import (MatchConfig, PoseTracker, ScanMatcher, map_field, scan_from_disparity,
                                               structure_in_view)
 from offboard.perception.occupancy import FloorMap, OccupancyGrid
@@ -398,16 +398,11 @@ class Navigator:
         if is_free(floor, goal):
             return goal
         cell = nearest_free_cell(floor, goal)
-        if cell is None:
-            return None
-        from_here = distance_field(floor, here)
-        if math.isfinite(from_here[cell]):
-            return cell_center(floor, cell)
-        reachable = cell_centers(floor, np.argwhere(np.isfinite(from_here)))
-        if not len(reachable):
-            return None
-        best = reachable[int(np.argmin(np.hypot(reachable[:, 0] - goal[0], reachable[:, 1] - goal[1])))]
-        return float(best[0]), float(best[1])
+        if cell is not None:
+            from_here = distance_field(floor, here)
+            if not math.isfinite(from_here[cell]):
+                cell = nearest_free_cell(floor, goal, among=np.isfinite(from_here))
+        return None if cell is None else cell_center(floor, cell)
 
     def _command(self, command: Callable[..., T], *args: float) -> T:
         """A robot command (:func:`retry_busy`), its wall time booked as waiting, not processing."""
