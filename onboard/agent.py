@@ -144,8 +144,9 @@ class Agent:
         self._shutdown = threading.Event()
         self._wake_watchdog = threading.Event()  # a lost planner is acted on at once, not at the next poll
         # a stop is acted on by the watchdog's thread as it arrives, before it is decoded or queued (the
-        # queue may be full, the dispatcher blocked), and by the dispatcher, which answers it; the lock
-        # keeps the early stop from landing on a move the dispatcher starts after answering
+        # queue may be full, the dispatcher blocked), and again by the dispatcher in its place in the
+        # queue, readable or not; the lock keeps the early stop from landing on a move the dispatcher
+        # starts after that
         self._stop_asked = threading.Event()
         self._stop_lock = threading.Lock()
         self._declared: list = []
@@ -250,6 +251,8 @@ class Agent:
                 getattr(self, f"_on_{kind}")(query, command)
             except ProtocolError as exc:
                 log.warning("%s: malformed command: %s", kind, exc)
+                if kind == "stop":  # unreadable, but a stop all the same: the moves queued before it too
+                    self._stop_in_order("malformed stop command")
                 self._reply_error(query, _guess_command_id(payload), "protocol", str(exc))
             except CommandRefused as exc:
                 log.warning("%s refused: %s", kind, exc)
@@ -321,10 +324,7 @@ class Agent:
         return turn_rad, distance_m
 
     def _on_stop(self, query: zenoh.Query, cmd: m.StopCommand) -> None:
-        with self._stop_lock:
-            self._stop_asked.clear()
-            failed = self._stop_all("stop command")
-        if failed:
+        if failed := self._stop_in_order("stop command"):
             raise CommandRefused("device", "; ".join(failed))
         deadline = time.monotonic() + 2.0
         while self.devices.base.reading().moving and time.monotonic() < deadline:
@@ -449,6 +449,13 @@ class Agent:
                 self._stop_all(f"watchdog: no word from the planner for {silent_s * 1000:.0f} ms")
             else:
                 wait_s = min(wait_s, timeout_s - silent_s)  # wake on the deadline itself
+
+    def _stop_in_order(self, why: str) -> list[str]:
+        """The dispatcher's stop, in the stop's place in the queue: the watchdog's early one for it is
+        then no longer due (:meth:`_stop_all`)."""
+        with self._stop_lock:
+            self._stop_asked.clear()
+            return self._stop_all(why)
 
     def _stop_all(self, why: str) -> list[str]:
         """Cancel every job, stop the base and halt the head, each even if another fails: this runs on

@@ -318,7 +318,8 @@ def test_a_stop_that_cannot_be_read_still_stops_the_robot(tmp_path, box_world):
         assert reply.err is not None  # answered as malformed ...
         mover.join(timeout=5.0)
         assert results and results[0].status == "stopped" and results[0].distance_m < 1.0  # ... and acted on
-    assert "stopping the base: stop asked" in (tmp_path / "onboard.log").read_text()
+    log_text = (tmp_path / "onboard.log").read_text()  # the watchdog's early stop or the dispatcher's, which come first
+    assert "stopping the base: stop asked" in log_text or "stopping the base: malformed stop command" in log_text
 
 
 def test_sigterm_stops_the_base_and_exits_cleanly(tmp_path, box_world):
