@@ -122,8 +122,8 @@ def target_views(runs: list[Run]) -> tuple[list[ViewedLook], int, int]:
     head's angles logged; and how many more in view repeated a view their run had already had.
 
     A repeated view (the same pose and head angles, as the oracle's looks from its viewpoint, or SYT's
-    confirming look until session 55) is rendered exactly again, so the detector answers as before: it is no new
-    draw, and counting it would weigh a lucky or unlucky view twice."""
+    confirming look until session 55) is rendered exactly again, so the detector answers as before:
+    it is no new draw, and counting it would weigh a lucky or unlucky view twice."""
     viewed: list[ViewedLook] = []
     logged = repeated = 0
     for number, (truth, looks, table) in enumerate(runs):
