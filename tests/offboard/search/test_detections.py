@@ -30,5 +30,5 @@ def test_a_detection_without_depth_is_placed_on_its_rays_not_where_a_strong_prio
     assert not found, search.state.estimate_m
     camera = obs.camera_in_world
     ray = (search.state.estimate_m - camera.translation) @ camera.rotation  # in the camera's frame
-    u, v = ray[:2] / ray[2] * (obs.intrinsics.fx_px, obs.intrinsics.fy_px) + (obs.intrinsics.cx_px, obs.intrinsics.cy_px)
+    u, v = obs.intrinsics.project(ray)
     assert ray[2] > 0 and box[0] - 5 <= u <= box[2] + 5 and box[1] - 5 <= v <= box[3] + 5, (u, v)
