@@ -312,6 +312,8 @@ class Search:
             self._look(decision)  # the look the move was chosen for
         elif result.status == "interrupted":  # a glance saw the target: decide again from here
             self.state.positions.append((result.pose.x_m, result.pose.y_m))
+            log.info("move stopped after %.2f m (%.2f m driven in all): %s", result.distance_m, self.state.distance_m,
+                     result.reason)
         else:
             self.state.unreachable.append(tuple(goal))
             log.warning("position (%.1f, %.1f) not reached: %s (%s)", goal[0], goal[1], result.status, result.reason)
@@ -444,9 +446,9 @@ class Search:
             self.state.status, self.state.found = "found", True
             log.info("target found at %s (P within %.2f m: %.3f)", np.round(estimate, 2), self.config.found_radius_m, near)
             return True
-        log.info("%s detection, estimate %s: P within %.2f m is %.3f < %.2f; looking on",
-                 "confident" if confident else "weak", np.round(estimate, 2), self.config.found_radius_m, near,
-                 self.config.found_prob)
+        log.info("%s detection after %d looks and %.2f m, estimate %s: P within %.2f m is %.3f < %.2f; looking on",
+                 "confident" if confident else "weak", self.state.actions, self.state.distance_m,
+                 np.round(estimate, 2), self.config.found_radius_m, near, self.config.found_prob)
         return False
 
     def _most_likely_m(self, cubes: np.ndarray) -> np.ndarray:
