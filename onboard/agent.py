@@ -44,6 +44,7 @@ REQUEST_TYPES: dict[str, type] = {
     "sim_fault": m.SimFault,
 }
 _SIM_ONLY = ("sim_truth", "sim_teleport", "sim_reset", "sim_fault")
+_MOTIONS = ("move", "look")  # what a stop that arrives after them, queued or not, cancels before it starts
 # Only a planner's commands count as word from it: anyone may poll state or info (an observer, a
 # dashboard, a crowd of them), and that must not keep alive a motion whose planner froze.
 _PLANNER_COMMANDS = ("move", "stop", "look", "capture")
@@ -137,7 +138,8 @@ class Agent:
         self.session = session
         self.keys = RobotKeys(robot_id)
         self._sim = sim
-        self._commands: queue.Queue[tuple[str, zenoh.Query] | None] = queue.Queue(maxsize=64)
+        # each command with the number of stops heard before it: a motion that a later stop overtook is not started
+        self._commands: queue.Queue[tuple[str, zenoh.Query, int] | None] = queue.Queue(maxsize=64)
         self._workers = {name: DeviceWorker(name) for name in ("base", "pantilt", "camera")}
         self._cancel = {"base": threading.Event(), "pantilt": threading.Event()}
         self._watch = _PlannerWatch()
@@ -149,6 +151,8 @@ class Agent:
         # starts after that
         self._stop_asked = threading.Event()
         self._stop_lock = threading.Lock()
+        self._stops_heard = 0  # every word on the stop key, counted as it arrives (_enqueuer)
+        self._count_lock = threading.Lock()  # held for an increment only: callbacks never wait on it
         self._declared: list = []
         self._threads: list[threading.Thread] = []
 
@@ -206,10 +210,12 @@ class Agent:
     def _enqueuer(self, kind: str) -> Callable[[zenoh.Query], None]:
         def enqueue(query: zenoh.Query) -> None:
             if kind == "stop":  # whatever its payload: any word on the stop key stops the robot
+                with self._count_lock:
+                    self._stops_heard += 1
                 self._stop_asked.set()
                 self._wake_watchdog.set()
             try:
-                self._commands.put_nowait((kind, query))
+                self._commands.put_nowait((kind, query, self._stops_heard))
             except queue.Full:
                 self._reply_error(query, "", "busy", "command queue full; the agent is overloaded")
         return enqueue
@@ -240,7 +246,7 @@ class Agent:
 
     def _dispatch_loop(self) -> None:
         while (item := self._commands.get()) is not None:
-            kind, query = item
+            kind, query, stops_before = item
             payload = query.payload.to_bytes() if query.payload is not None else b""
             try:
                 command = decode(payload, REQUEST_TYPES[kind])
@@ -248,6 +254,9 @@ class Agent:
                     raise CommandRefused("shutdown", "the agent is shutting down")
                 if kind in _PLANNER_COMMANDS:  # a well-formed command, not any bytes on its key
                     self._watch.heard(_sender(query))
+                if kind in _MOTIONS and stops_before < self._stops_heard:
+                    self._overtaken(query, kind, command)
+                    continue
                 getattr(self, f"_on_{kind}")(query, command)
             except ProtocolError as exc:
                 log.warning("%s: malformed command: %s", kind, exc)
@@ -275,6 +284,19 @@ class Agent:
             return lambda: self._reply(query, result, arrays)
         if not self._workers[device].try_submit(run):
             raise _busy(device)
+
+    def _overtaken(self, query: zenoh.Query, kind: str, cmd: m.MoveCommand | m.LookCommand) -> None:
+        """A motion that waited in the queue while a stop arrived: the stop cancels it before it starts
+        (even one that found the queue full, and so is not in it), and it is answered as any motion
+        that a stop cut short, where the device stands."""
+        log.warning("%s %s: a stop arrived while it waited; not started", kind, cmd.command_id)
+        now = self.devices.clock.now_s()
+        if kind == "move":
+            self._reply(query, m.MoveResult(cmd.command_id, "stopped", self._pose(), 0.0, 0.0, now))
+        else:
+            head = self.devices.pantilt.reading()
+            self._reply(query, m.LookResult(cmd.command_id, math.degrees(head.pan_rad), math.degrees(head.tilt_rad),
+                                            0.0, now))
 
     def _on_move(self, query: zenoh.Query, cmd: m.MoveCommand) -> None:
         turn_rad, distance_m = self._resolve_motion(cmd)

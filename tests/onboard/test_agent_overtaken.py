@@ -1,0 +1,95 @@
+"""A stop overtakes the motions queued before it: the agent runs in this process, so that its
+dispatcher can be held while commands queue up (between real processes the queue could not be
+filled reliably)."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import pytest
+from conftest import wait_until
+
+from onboard.agent import Agent
+from onboard.backends import build_robot
+from onboard.config import OnboardConfig
+from onboard.sim.world import load_world
+from shared import messages as m
+from shared.codec import decode, encode
+from shared.keys import RobotKeys
+from shared.launch import free_tcp_port
+from shared.rpc import RobotUnavailable, request
+from shared.transport import TransportConfig
+
+pytestmark = pytest.mark.integration
+
+QUEUE = 64  # the agent's command queue
+
+
+@pytest.mark.parametrize("queue_full", [False, True], ids=["stop-queued", "stop-finds-the-queue-full"])
+def test_a_motion_queued_before_a_stop_is_not_started(queue_full):
+    """A move and a look wait behind a slow state request; a stop follows them. Until session 56 the
+    dispatcher started them in their turn: the stop, once dispatched, cut the move short, and one that
+    found the queue full (answered busy) stopped nothing that came after its early stop, so the
+    queued move drove its whole way."""
+    config = OnboardConfig()
+    robot = build_robot(config, load_world("paper-lab", robot_radius_m=config.base.radius_m))
+    base, keys = robot.devices.base, RobotKeys("overtaken")
+    endpoint, stop, held, release = f"tcp/127.0.0.1:{free_tcp_port()}", threading.Event(), threading.Event(), threading.Event()
+    with TransportConfig(listen=(endpoint,), multicast_scouting=False).open() as agent_session:
+        agent = Agent(config, robot.devices, agent_session, "overtaken", sim=robot.sim)
+        on_state = agent._on_state
+
+        def slow_first_state(query, cmd):  # a device read that hangs: the dispatcher waits with it
+            if cmd.command_id == "hold":
+                held.set()
+                assert release.wait(10.0)
+            on_state(query, cmd)
+        agent._on_state = slow_first_state
+        runner = threading.Thread(target=agent.run, args=(stop,))
+        runner.start()
+        try:
+            with TransportConfig(robot_id="overtaken", connect=(endpoint,), multicast_scouting=False).open() as session:
+                assert wait_until(lambda: _answers(session, keys), 10.0), "the agent never answered"
+                before = base.true_pose
+                ask = lambda key, command: session.get(key, payload=encode(command), timeout=10.0)
+                hold = ask(keys.state, m.StateRequest("hold"))
+                assert held.wait(5.0)
+                move = ask(keys.move, m.MoveCommand("queued-move", distance_m=0.5))
+                look = ask(keys.look, m.LookCommand("queued-look", pan_deg=40.0, tilt_deg=10.0))
+                fillers = [ask(keys.state, m.StateRequest(f"f{i}")) for i in range(QUEUE - 2 if queue_full else 3)]
+                assert wait_until(lambda: agent._commands.qsize() == 2 + len(fillers), 5.0)  # all in, in order
+                stopped = ask(keys.stop, m.StopCommand("stop"))
+                if queue_full:
+                    stop_reply = next(iter(stopped))  # answered at once: no room for it
+                else:
+                    assert wait_until(lambda: agent._commands.qsize() == 3 + len(fillers), 5.0)  # the stop is in
+                release.set()
+                move_reply, look_reply = next(iter(move)), next(iter(look))
+                if not queue_full:
+                    stop_reply = next(iter(stopped))
+                for handler in [hold, *fillers]:
+                    list(handler)
+        finally:
+            release.set()
+            stop.set()
+            runner.join(timeout=10.0)
+    if queue_full:
+        assert decode(stop_reply.err.payload.to_bytes(), m.ErrorReply).code == "busy"
+    else:
+        assert decode(stop_reply.ok.payload.to_bytes(), m.StopResult).command_id == "stop"
+    moved = decode(move_reply.ok.payload.to_bytes(), m.MoveResult)
+    looked = decode(look_reply.ok.payload.to_bytes(), m.LookResult)
+    assert (moved.status, moved.distance_m) == ("stopped", 0.0)
+    assert (looked.pan_deg, looked.tilt_deg) == (0.0, 0.0)  # the head still where it started
+    after = base.true_pose
+    assert math.hypot(after.x_m - before.x_m, after.y_m - before.y_m) < 1e-9
+
+
+def _answers(session, keys: RobotKeys) -> bool:
+    """Whether the agent's routes are up (a query sent before them reaches nobody)."""
+    try:
+        request(session, keys.info, m.InfoRequest("ready"), m.Info, 2.0)
+    except RobotUnavailable:
+        return False
+    return True
