@@ -49,7 +49,8 @@ log = logging.getLogger(__name__)
 
 FILE_NAME = "checkpoint.syt"
 MAGIC = b"SYTCKPT\x00"
-VERSION = 4  # 2: the belief's blocked facings; 3: the dynamic priors' memory; 4: no retaken settings
+VERSION = 5  # 2: the belief's blocked facings; 3: the dynamic priors' memory; 4: no retaken settings;
+# 5: the views of looks too, not only of glances
 ALIGN = 64
 HEADER_KEYS = ("request", "transport", "config", "wall_time_s", "search", "belief", "coded", "grid_shape", "arrays")
 
@@ -161,7 +162,7 @@ def capture(search: Search) -> tuple[dict, dict[str, np.ndarray]]:
         "pending_processing_s": float(search._pending_processing_s),
         "planner_processing_s": float(search.planner.time_model.processing_s),
         "tracker": search.tracker.state(),
-        "glanced": [_plain(np.concatenate([view.rotation.ravel(), view.translation])) for view in search._glanced],
+        "seen": [_plain(np.concatenate([view.rotation.ravel(), view.translation])) for view in search._seen],
         "priors": {},
     }
     for name, prior in _look_priors(search):  # what each dynamic prior has applied so far
@@ -223,7 +224,7 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
     belief, odds, observed = decode_maps(checkpoint)
     with _damaged(checkpoint.path, "search"):  # read all of it before the search is changed
         part = checkpoint.header["search"]
-        glanced = [_view(g) for g in part.get("glanced", [])]  # none in a checkpoint from before session 48
+        seen = [_view(g) for g in part["seen"]]
         state = state_from_plain(part["state"])
         clock_start_s, pending_s, planner_s = (float(part[k]) for k in ("clock_start_s", "pending_processing_s",
                                                                          "planner_processing_s"))
@@ -235,7 +236,7 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
     search._clock_start_s = clock_start_s
     search._pending_processing_s = pending_s
     search.planner.set_processing_s(planner_s)
-    search._glanced = glanced
+    search._seen = seen
     if search.state.widened:
         search.planner.widen()
     search.measure_driving()

@@ -192,7 +192,7 @@ class Search:
         self._pan_tilt = head_rad(start)
         self._plans_positions = policy is None  # baselines keep the report's fixed grid
         self._pending_processing_s = 0.0  # planning done towards the coming look
-        self._glanced: list[RigidTransform] = []  # the camera poses of the glances so far, in odometry
+        self._seen: list[RigidTransform] = []  # the camera poses of the looks and glances so far, in odometry
         self._glance_recording_s = 0.0  # wall time logging glances during the current move
         self._squeeze_to: tuple[float, float] | None = None  # a move chosen on the bare radius (_choose)
         self.on_action: Callable[[Search], None] | None = None  # after every action (the checkpoint)
@@ -338,14 +338,20 @@ class Search:
         capture = self.robot.capture()
         motion_s = self.robot_time_s() - before
         name, (detector, table) = self._choose_detector(decision)
-        obs = self.perception.observe(capture, self.tracker.world_pose(capture.pose.to_pose()), detector)
+        new = self._new_view(capture)
+        obs = self.perception.observe(capture, self.tracker.world_pose(capture.pose.to_pose()),
+                                      detector if new else None, update_map=new)
         self.state.actions += 1
-        realised, found = self._interpret(obs, table)
         self.state.took(decision.setting, at_m=(pose.x_m, pose.y_m))
-        for prior in self.dynamic_priors:  # looks only: a glance repeats much of the last one's view, and
-            factor = prior(obs, self)  # saliency multiplies in whatever each image shows
-            if factor is not None:
-                self.belief.reweight(factor)
+        if new:
+            realised, found = self._interpret(obs, table)
+            for prior in self.dynamic_priors:  # looks only: a glance repeats much of the last one's view, and
+                factor = prior(obs, self)  # saliency multiplies in whatever each image shows
+                if factor is not None:
+                    self.belief.reweight(factor)
+        else:
+            realised, found = 0.0, False
+            log.info("look %d: the same view as an earlier image, which says nothing new", self.state.actions)
         processing_s = self._pending_processing_s + time.perf_counter() - started  # the wall clock's part
         self._account(decision, obs, realised, motion_s, processing_s)
         self.state.looks.append(LookTrace(obs.pose.x_m, obs.pose.y_m, decision.azimuth_rad,
@@ -356,15 +362,10 @@ class Search:
         """Search a frame the navigator took toward the motion, as a look is searched: the detector,
         then Bayes. The frame is there anyway (the navigator maps with it), and a target on the way is
         seen before the robot drives past it. A detection stops the move, so the search decides again
-        from there: a look to confirm it, or the target is found already. A view already glanced at
-        (a move begun again from where the last one stopped) is skipped: the same image says nothing
-        new, and counted twice it would make a weak false detection look confirmed. Views are compared
-        where odometry puts them: a scan match between two frames moves the corrected pose, not the camera."""
-        head = math.radians(capture.pan_deg), math.radians(capture.tilt_deg)
-        view = self.mount.camera_in_world(capture.pose.to_pose(), *head)
-        if any(same_view(view, earlier) for earlier in self._glanced):
+        from there: a look to confirm it, or the target is found already. A view already seen (a move
+        begun again from where the last one stopped) is skipped (:meth:`_new_view`)."""
+        if not self._new_view(capture):
             return ""
-        self._glanced.append(view)
         detector, table = self._planning_detector()
         obs = self.perception.observe(capture, pose, detector, update_map=False, disparity=disparity)
         _, found = self._interpret(obs, table, "glance after look")
@@ -375,6 +376,19 @@ class Search:
         if obs.detection is None:
             return ""
         return "the target found on the way" if found else "a detection on the way"
+
+    def _new_view(self, capture: Capture) -> bool:
+        """Whether ``capture`` shows a view no look or glance has shown yet (and remember it). The same
+        view again (a pose the robot returned to, or a look taken again where it stands) gives the
+        same image, rendered exactly again or captured again: the detector would repeat its answer,
+        right or wrong, and the update would count it as new evidence. Views are compared where
+        odometry puts them: a scan match between two images moves the corrected pose, not the camera."""
+        view = self.mount.camera_in_world(capture.pose.to_pose(), math.radians(capture.pan_deg),
+                                          math.radians(capture.tilt_deg))
+        if any(same_view(view, earlier) for earlier in self._seen):
+            return False
+        self._seen.append(view)
+        return True
 
     def _account(self, decision: Decision, obs: Observation, realised: float, motion_s: float,
                  processing_s: float) -> None:
