@@ -14,8 +14,9 @@ it drives SYT:
 
 "Look around" takes every camera setting of the planner once, quickest to reach first. A weak
 detection needs a second look before the search ends; once a detection has collapsed the belief onto
-one spot the tours let the SYT planner choose that look, so confirming is not what the comparison
-measures.
+one spot every baseline, the oracle too, lets the SYT planner choose that look, so confirming is not
+what the comparison measures. (Until session 56 the oracle looked again from where it stood, at the
+same angles: the same image, which the search then counted as a second detection.)
 
 Registry: :data:`BASELINES` maps a name to a maker taking the run's :class:`BaselineContext` (seed,
 truth) and returning the factory ``(planner) -> Policy`` that :func:`offboard.search.run.run_search`
@@ -76,6 +77,14 @@ class BaselineContext:
     config: BaselineConfig = BaselineConfig()
 
 
+def confirming(planner: SearchPlanner, config: BaselineConfig, *decide_args) -> Decision | None:
+    """SYT's choice while a detection waits to be confirmed (the belief collapsed onto it), else None."""
+    if planner.belief.coarse_mass().sum(axis=-1).max() < config.collapsed_mass:
+        return None
+    decision = planner.decide(*decide_args)
+    return None if decision.kind == "stop" else decision
+
+
 def _within_budget(planner: SearchPlanner, decision: Decision, elapsed_s: float) -> Decision:
     if decision.kind != "stop" and elapsed_s + decision.time_s > planner.config.budget_s:
         return Decision("stop", f"the next action ({decision.time_s:.1f} s) would exceed the budget "
@@ -105,11 +114,7 @@ class _Tour:
         return _within_budget(self.planner, decision, elapsed_s)
 
     def _confirm(self, *args) -> Decision | None:
-        """SYT's choice while a weak detection waits to be confirmed (the belief collapsed onto it)."""
-        if self.planner.belief.coarse_mass().sum(axis=-1).max() < self.config.collapsed_mass:
-            return None
-        decision = self.planner.decide(*args)
-        return None if decision.kind == "stop" else decision
+        return confirming(self.planner, self.config, *args)
 
     def _look_around(self, pose: Pose2D, pan_rad: float, tilt_rad: float, taken: frozenset[int]) -> Decision | None:
         here = np.hypot(*(self.planner.positions - (pose.x_m, pose.y_m)).T) <= self.planner.config.same_position_m
@@ -213,6 +218,11 @@ class Oracle:
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
                views: Views = ()) -> Decision:
+        # another view, as the tours confirm: the same one again would show the same image
+        if confirm := confirming(self.planner, self.config, pose, pan_rad, tilt_rad, elapsed_s, occupancy,
+                                 path_lengths_m, taken, views):
+            self._sent_from_m = None  # SYT's move, not one toward the viewpoint
+            return _within_budget(self.planner, confirm, elapsed_s)
         if self._from_start is None:
             self._from_start = self._seen_from((pose.x_m, pose.y_m))
             self.goal = (pose.x_m, pose.y_m) if self._from_start else None
