@@ -12,7 +12,8 @@ from conftest import running_agent
 from offboard.bench.navigation import true_floor_map
 from offboard.navigation.grid_planner import is_free, path_length_m, shortest_path
 from offboard.navigation.localization import PoseTracker
-from offboard.navigation.navigator import Navigator, NavigatorConfig, retry_busy
+from offboard.navigation.navigator import Navigator, NavigatorConfig, _Run, retry_busy
+from offboard.navigation.tangent_bug import TangentBug
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.stereo import StereoConfig
 from offboard.perception.voxel_grid import VoxelGrid
@@ -187,6 +188,36 @@ def test_a_gap_the_margin_shuts_on_the_map_is_open_on_the_bare_radius(agent):
     squeezed = navigator.floor_map(squeeze=True)
     assert is_free(squeezed, (5.025, 2.825)) and not is_free(squeezed, (5.025, 2.775))  # one cube wide
     assert shortest_path(squeezed, west, east) is not None
+
+
+def test_a_doorway_too_narrow_for_the_tangent_graph_is_passed_on_the_global_path(agent):
+    """A 4 × 3 m room split at x = 1.9-2.1 m by a wall with a 0.75 m doorway (y 1.10-1.85): the
+    margin's 7 cubes each side leave one cube of it open, narrower than TangentBug's edge clearance,
+    so its tangent graph offers no node there and it turns to boundary following. Reset every step,
+    the bug's loop and length bounds never trip: the robot went to and fro in the doorway, 0.12 m a
+    step, until the run's budget (150 steps, 18.9 m driven) ran out. Planned on the written map, each
+    move executed exactly (the robot itself stays put)."""
+    _, robot = agent
+    navigator = Navigator(robot, OccupancyGrid(VoxelGrid((4.0, 3.0, 2.5), 0.05)))
+    with navigator.occupancy.edit() as (log_odds, observed):
+        wall = np.ix_(np.arange(38, 42), np.r_[0:22, 37:60], np.arange(4, 20))  # 0.2-1.0 m high
+        log_odds[wall] = navigator.occupancy.config.clamp_max
+        observed[wall] = True
+    assert np.count_nonzero(~navigator.floor_map().blocked[40]) == 1  # one cube open in the doorway
+    start, goal = (1.0, 1.0), (3.0, 1.0)
+    run = _Run(goal, 0.0, 0.0, (0, 0), 0.0, 0.0, squeeze=False)
+    bug = TangentBug(goal, navigator.config.bug)
+    here, driven = start, 0.0
+    for _ in range(20):
+        if math.dist(here, goal) <= navigator.config.goal_tolerance_m:
+            break
+        navigator.tracker = PoseTracker(navigator._odom, world=Pose2D(*here, 0.0))
+        waypoint, why = navigator._plan(run, bug)
+        assert waypoint is not None, why
+        driven += math.dist(here, waypoint)
+        here = waypoint
+    assert math.dist(here, goal) <= navigator.config.goal_tolerance_m, f"at {here} after {driven:.1f} m"
+    assert driven < 1.2 * path_length_m(shortest_path(navigator.floor_map(), start, goal))
 
 
 @pytest.mark.parametrize("relocalize", [True, False])
