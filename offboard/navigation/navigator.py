@@ -27,8 +27,9 @@ earlier step ended (the map flickering near a narrow gap) also earns a look all 
 ``reached``, ``unreachable`` (no route even so), ``stalled_out`` or ``budget``; all are bounded. A caller
 may also see each look toward the motion once it is mapped (``observe``): the search runs its detector
 on it, and a run it asks to stop ends ``interrupted`` where the robot stands.
-Where TangentBug's tangent graph offers no node that gets closer (a gap narrower than its edge
-clearance), the step goes toward the first corner of the global path instead.
+Where TangentBug's step gets no closer on D, the step goes toward the first corner of the global path
+instead: at a gap narrower than its edge clearance the tangent graph offers no node that does, or none
+at all, and the bug turns to boundary following.
 """
 
 from __future__ import annotations
@@ -367,7 +368,11 @@ class Navigator:
         # motion-to-goal with it as heuristic never needs boundary following, so its memory is reset.
         bug.retarget(target)
         step = bug.step(floor, here, lambda points: distances_at(floor, to_target, points))
-        if step.status == "move" and step.mode == "to_goal":
+        # Every move but an escape from blocked space must get closer on the path lengths, boundary
+        # following's too: with no tangent node in sight (a gap narrower than the edge clearance) the
+        # bug still turns to following, and its loop and length bounds, reset with it every step,
+        # never end a run going to and fro there.
+        if step.status == "move" and step.mode != "escape":
             progress = to_target[start] - distances_at(floor, to_target, np.array([step.waypoint]))[0]
             if progress < 0.5 * math.dist(here, step.waypoint):
                 step = self._along_path(floor, here, target)
@@ -379,8 +384,8 @@ class Navigator:
         return step.waypoint, step.mode
 
     def _along_path(self, floor: FloorMap, here: Point, target: Point) -> BugStep:
-        """Toward the first corner of the global path, which is in sight. The fallback when the local
-        tangent graph offers no node that gets closer (a gap narrower than its edge clearance)."""
+        """Toward the first corner of the global path, which is in sight. The fallback when TangentBug's
+        step gets no closer (a gap narrower than its edge clearance, where it offers no tangent node)."""
         path = shortest_path(floor, here, target)
         if path is None or len(path) < 2:
             return BugStep("unreachable", None, "done", "no global path")
