@@ -44,7 +44,6 @@ REQUEST_TYPES: dict[str, type] = {
     "sim_fault": m.SimFault,
 }
 _SIM_ONLY = ("sim_truth", "sim_teleport", "sim_reset", "sim_fault")
-_MOTIONS = ("move", "look")  # what a stop that arrives after them, queued or not, cancels before it starts
 # Only a planner's commands count as word from it: anyone may poll state or info (an observer, a
 # dashboard, a crowd of them), and that must not keep alive a motion whose planner froze.
 _PLANNER_COMMANDS = ("move", "stop", "look", "capture")
@@ -139,6 +138,7 @@ class Agent:
         self.keys = RobotKeys(robot_id)
         self._sim = sim
         # each command with the number of stops heard before it: a motion that a later stop overtook is not started
+        # (_fresh_cancel), since a stop that found the queue full is not in it to stop the motion in its turn
         self._commands: queue.Queue[tuple[str, zenoh.Query, int] | None] = queue.Queue(maxsize=64)
         self._workers = {name: DeviceWorker(name) for name in ("base", "pantilt", "camera")}
         self._cancel = {"base": threading.Event(), "pantilt": threading.Event()}
@@ -152,7 +152,8 @@ class Agent:
         self._stop_asked = threading.Event()
         self._stop_lock = threading.Lock()
         self._stops_heard = 0  # every word on the stop key, counted as it arrives (_enqueuer)
-        self._count_lock = threading.Lock()  # held for an increment only: callbacks never wait on it
+        self._queue_lock = threading.Lock()  # a count and a place in the queue go together; never held long
+        self._dispatching_after = 0  # the stops heard before the command the dispatcher is serving
         self._declared: list = []
         self._threads: list[threading.Thread] = []
 
@@ -209,15 +210,16 @@ class Agent:
 
     def _enqueuer(self, kind: str) -> Callable[[zenoh.Query], None]:
         def enqueue(query: zenoh.Query) -> None:
-            if kind == "stop":  # whatever its payload: any word on the stop key stops the robot
-                with self._count_lock:
-                    self._stops_heard += 1
-                self._stop_asked.set()
-                self._wake_watchdog.set()
             try:
-                self._commands.put_nowait((kind, query, self._stops_heard))
+                with self._queue_lock:  # put_nowait never blocks
+                    self._stops_heard += kind == "stop"
+                    self._commands.put_nowait((kind, query, self._stops_heard))
             except queue.Full:
                 self._reply_error(query, "", "busy", "command queue full; the agent is overloaded")
+            finally:
+                if kind == "stop":  # whatever its payload, queued or not: any word on the stop key stops the robot
+                    self._stop_asked.set()
+                    self._wake_watchdog.set()
         return enqueue
 
     def _on_heartbeat(self, sample: zenoh.Sample) -> None:
@@ -246,7 +248,7 @@ class Agent:
 
     def _dispatch_loop(self) -> None:
         while (item := self._commands.get()) is not None:
-            kind, query, stops_before = item
+            kind, query, self._dispatching_after = item
             payload = query.payload.to_bytes() if query.payload is not None else b""
             try:
                 command = decode(payload, REQUEST_TYPES[kind])
@@ -254,9 +256,6 @@ class Agent:
                     raise CommandRefused("shutdown", "the agent is shutting down")
                 if kind in _PLANNER_COMMANDS:  # a well-formed command, not any bytes on its key
                     self._watch.heard(_sender(query))
-                if kind in _MOTIONS and stops_before < self._stops_heard:
-                    self._overtaken(query, kind, command)
-                    continue
                 getattr(self, f"_on_{kind}")(query, command)
             except ProtocolError as exc:
                 log.warning("%s: malformed command: %s", kind, exc)
@@ -285,19 +284,6 @@ class Agent:
         if not self._workers[device].try_submit(run):
             raise _busy(device)
 
-    def _overtaken(self, query: zenoh.Query, kind: str, cmd: m.MoveCommand | m.LookCommand) -> None:
-        """A motion that waited in the queue while a stop arrived: the stop cancels it before it starts
-        (even one that found the queue full, and so is not in it), and it is answered as any motion
-        that a stop cut short, where the device stands."""
-        log.warning("%s %s: a stop arrived while it waited; not started", kind, cmd.command_id)
-        now = self.devices.clock.now_s()
-        if kind == "move":
-            self._reply(query, m.MoveResult(cmd.command_id, "stopped", self._pose(), 0.0, 0.0, now))
-        else:
-            head = self.devices.pantilt.reading()
-            self._reply(query, m.LookResult(cmd.command_id, math.degrees(head.pan_rad), math.degrees(head.tilt_rad),
-                                            0.0, now))
-
     def _on_move(self, query: zenoh.Query, cmd: m.MoveCommand) -> None:
         turn_rad, distance_m = self._resolve_motion(cmd)
         limits = self.devices.base.limits
@@ -323,7 +309,10 @@ class Agent:
         if self._workers[device].busy:
             raise _busy(device)
         cancel = self._cancel[device] = threading.Event()
-        if self._shutdown.is_set():  # _close cancelled the flags before this one was in place
+        # Set at once, and the job ends where the device stands, when _close cancelled the flags before
+        # this one was in place, or when a stop came after the command was queued: one that found the
+        # queue full is not in it to stop the motion in its turn. (A stop after this check sets this flag.)
+        if self._shutdown.is_set() or self._stops_heard > self._dispatching_after:
             cancel.set()
         return cancel
 

@@ -148,7 +148,8 @@ class InfoRequest:
 @dataclass(frozen=True)
 class ErrorReply:
     """A refused or failed command. ``code``: ``protocol`` (malformed), ``limit`` (outside the
-    device limits), ``busy`` (the device is executing another command), ``device`` (hardware fault),
+    device limits), ``busy`` (the device is executing another command, or the agent's command queue
+    is full), ``device`` (hardware fault),
     ``planner`` (a move from a planner whose liveliness token is gone), ``shutdown`` (the agent is
     stopping)."""
 
@@ -160,7 +161,8 @@ class ErrorReply:
 @dataclass(frozen=True)
 class MoveResult:
     """``done``: the motion completed; ``stalled``: blocked by an obstacle (stopped at contact);
-    ``stopped``: interrupted by a stop command or the watchdog."""
+    ``stopped``: interrupted by a stop command or the watchdog, or never begun (0 m) because a stop
+    arrived while it waited in the agent's queue."""
 
     command_id: str
     status: Literal["done", "stalled", "stopped"]
@@ -179,6 +181,9 @@ class StopResult:
 
 @dataclass(frozen=True)
 class LookResult:
+    """Where the head stands once the look ends: not where it was asked to go if a stop cut the look
+    short, or arrived while it waited in the agent's queue (then it never began)."""
+
     command_id: str
     pan_deg: float = field(metadata=bounds(-360.0, 360.0))
     tilt_deg: float = field(metadata=bounds(-90.0, 90.0))
