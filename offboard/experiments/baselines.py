@@ -108,13 +108,11 @@ class _Tour:
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
                views: Views = ()) -> Decision:
-        decision = (self._confirm(pose, pan_rad, tilt_rad, elapsed_s, occupancy, path_lengths_m, taken)
+        decision = (confirming(self.planner, self.config, pose, pan_rad, tilt_rad, elapsed_s, occupancy,
+                               path_lengths_m, taken)
                     or self._look_around(pose, pan_rad, tilt_rad, taken)
                     or self._next_position(pose, occupancy, np.asarray(path_lengths_m, float)))
         return _within_budget(self.planner, decision, elapsed_s)
-
-    def _confirm(self, *args) -> Decision | None:
-        return confirming(self.planner, self.config, *args)
 
     def _look_around(self, pose: Pose2D, pan_rad: float, tilt_rad: float, taken: frozenset[int]) -> Decision | None:
         here = np.hypot(*(self.planner.positions - (pose.x_m, pose.y_m)).T) <= self.planner.config.same_position_m
