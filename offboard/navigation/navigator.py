@@ -365,7 +365,8 @@ class Navigator:
         if start is None or not math.isfinite(to_target[start]):
             return None, "no route to the goal on the map"
         # Path lengths on the map form a navigation function, which has no local minima: TangentBug's
-        # motion-to-goal with it as heuristic never needs boundary following, so its memory is reset.
+        # motion-to-goal with it as heuristic needs no boundary following, so its memory is reset (the
+        # bug still turns to following where it sees no tangent node: see below).
         bug.retarget(target)
         step = bug.step(floor, here, lambda points: distances_at(floor, to_target, points))
         # Every move but an escape from blocked space must get closer on the path lengths, boundary

@@ -10,7 +10,7 @@ crash leaves the previous checkpoint or the new one, never part of one. It holds
 - the search's history (:class:`SearchState`: looks, taken settings, unreachable goals, positions,
   trail, planning times, motion and processing totals, estimate), the robot clock at the start, the
   planning time not yet booked, the planner's measured processing time per look, the camera poses
-  of the frames searched on the way (so that none is searched twice), and what each dynamic prior
+  of every image searched, looks and glances (so that no view is searched twice), and what each dynamic prior
   has applied so far,
 - the wall time so far, the search configuration, the request and the transport, so that
   ``syt-offboard search --resume DIR`` needs no other flag.

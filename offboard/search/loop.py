@@ -72,12 +72,14 @@ class SearchConfig:
     detector: Literal["sift", "ncc", "auto"] = "sift"
     found_prob: float = field(default=0.95, metadata=bounds(0.5, 1.0))  # belief near a detection to call it found
     # ... near a confident detection that stereo located: it seldom errs, and a second view of it cost a look
-    # and metres for nothing (dev, session 56: 0.8 against 0.95, SPL +0.013 and 0.5 looks fewer)
+    # and metres for nothing (dev, session 56: 0.8 against 0.95, SPL +0.012 and 0.5 looks fewer)
     located_found_prob: float = field(default=0.8, metadata=bounds(0.5, 1.0))
     # ... within this of it: wider than a located detection's spread (3 σ of its depth: 0.35 m at 2.6 m),
     # or even decisive evidence falls short and the robot drives on to confirm; the harness's success radius
     found_radius_m: float = field(default=0.5, metadata=bounds(0.05, 2.0))
-    false_positive_rate: float = field(default=0.005, metadata=bounds(1e-6, 0.5))  # α at least: 0 of 200 negatives
+    # α of a confident detection: a floor below the calibration's bound (0 of 200 negatives, 3/200 at 95 %),
+    # since no detector is infallible and a confident one errs less than any detection
+    false_positive_rate: float = field(default=0.005, metadata=bounds(1e-6, 0.5))
     # α of a weak detection: the calibration's bound for any detection, 3/200 (rule of three: none in its
     # 200 views without the target); until session 56 a guess of 0.1, which let a weak detection at the
     # target gather 5 % of the belief, and the search drove on

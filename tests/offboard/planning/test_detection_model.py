@@ -96,8 +96,8 @@ def test_depth_uncertainty_grows_with_distance():
 def test_far_away_one_confident_detection_is_found_only_as_a_located_one_and_a_weak_one_needs_a_second():
     """At 2.6 m the located centre spreads (σ 0.12 m), so one confident detection leaves more outside
     the found radius than ``found_prob`` allows: found only by ``located_found_prob``, which holds for
-    a confident detection that stereo located. A weak one, with its larger false-positive rate, is
-    not found by either, and a second detection is decisive. The test once used a rate of 1e-7 and
+    a confident detection that stereo located. A weak one, with its larger false-positive rate,
+    gathers less, and a second detection is decisive. The test once used a rate of 1e-7 and
     claimed one was enough."""
     config = SearchConfig()
     at = np.array([CAMERA.translation[0] + 2.6, 1.5, CAMERA.translation[2]])
