@@ -23,9 +23,6 @@ from shared.transport import TransportConfig
 
 pytestmark = pytest.mark.integration
 
-QUEUE = 64  # the agent's command queue
-
-
 @pytest.mark.parametrize("queue_full", [False, True], ids=["stop-queued", "stop-finds-the-queue-full"])
 def test_a_motion_queued_before_a_stop_is_not_started(queue_full):
     """A move and a look wait behind a slow state request; a stop follows them. Until session 56 the
@@ -35,7 +32,8 @@ def test_a_motion_queued_before_a_stop_is_not_started(queue_full):
     config = OnboardConfig()
     robot = build_robot(config, load_world("paper-lab", robot_radius_m=config.base.radius_m))
     base, keys = robot.devices.base, RobotKeys("overtaken")
-    endpoint, stop, held, release = f"tcp/127.0.0.1:{free_tcp_port()}", threading.Event(), threading.Event(), threading.Event()
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    stop, held, release = threading.Event(), threading.Event(), threading.Event()
     with TransportConfig(listen=(endpoint,), multicast_scouting=False).open() as agent_session:
         agent = Agent(config, robot.devices, agent_session, "overtaken", sim=robot.sim)
         on_state = agent._on_state
@@ -57,7 +55,7 @@ def test_a_motion_queued_before_a_stop_is_not_started(queue_full):
                 assert held.wait(5.0)
                 move = ask(keys.move, m.MoveCommand("queued-move", distance_m=0.5))
                 look = ask(keys.look, m.LookCommand("queued-look", pan_deg=40.0, tilt_deg=10.0))
-                fillers = [ask(keys.state, m.StateRequest(f"f{i}")) for i in range(QUEUE - 2 if queue_full else 3)]
+                fillers = [ask(keys.state, m.StateRequest(f"f{i}")) for i in range(agent._commands.maxsize - 2 if queue_full else 3)]
                 assert wait_until(lambda: agent._commands.qsize() == 2 + len(fillers), 5.0)  # all in, in order
                 stopped = ask(keys.stop, m.StopCommand("stop"))
                 if queue_full:

@@ -543,7 +543,7 @@ def test_baselines_let_syt_confirm_a_weak_detection(name):
     policy = BASELINES[name](BaselineContext(truth=TRUTH))(planner)
     everything = set(range(len(planner.settings)))
     d = _decide(policy, planner, Pose2D(3.0, 1.2, 0.0), everything - {4})
-    assert d.find_prob > 0.3 and not {"look around", "oracle"} & set(d.reason.replace(":", " ").split(" "))
+    assert d.find_prob > 0.3 and not any(own in d.reason for own in ("look around", "oracle:"))
 
 
 @pytest.mark.parametrize("jobs", [1, 2, 8])
