@@ -9,7 +9,7 @@ it drives SYT:
 - ``frontier``: the nearest candidate next to unknown floor, else the nearest unvisited one;
 - ``oracle``: drive to the closest floor position from which the detector finds the target almost
   surely (its measured table), with room to stop a little off, and look straight at it (it is given
-  the truth); should those looks miss, the closest such position at least 1 m from it. Where it
+  the truth); should that look miss, the closest such position at least 1 m from it. Where it
   starts in view of the target, it looks from there first.
 
 "Look around" takes every camera setting of the planner once, quickest to reach first. A weak
@@ -52,10 +52,11 @@ PolicyFactory = Callable[[SearchPlanner], Policy]
 
 @dataclass(frozen=True)
 class BaselineConfig:
-    # a coarse block holding this much of the belief: a detection collapsed it (priors never come close)
+    # a detection collapsed the belief: a coarse block holds this much of it, and this many times what any
+    # block held at the start (a prior as sharp as the shipped suites' tables, 0.05 at most, leaves room)
     collapsed_mass: float = field(default=0.1, metadata=bounds(0.0, 1.0))
+    collapsed_gain: float = field(default=2.0, metadata=bounds(1.0, 1e6))
     frontier_radius_m: float = field(default=0.75, metadata=bounds(0.05, 10.0))  # "adjacent" to unknown floor
-    oracle_looks: int = field(default=3, metadata=bounds(1, 100))  # looks at the target before giving up
     oracle_moves: int = field(default=2, metadata=bounds(1, 100))  # moves to the viewpoint that gain no ground
     oracle_headway_m: float = field(default=0.1, metadata=bounds(0.01, 5.0))  # ... less than this
     # viewpoints to try, each at least oracle_retry_m from those tried: another view, not the same one a step off
@@ -77,12 +78,25 @@ class BaselineContext:
     config: BaselineConfig = BaselineConfig()
 
 
-def confirming(planner: SearchPlanner, config: BaselineConfig, *decide_args) -> Decision | None:
-    """SYT's choice while a detection waits to be confirmed (the belief collapsed onto it), else None."""
-    if planner.belief.coarse_mass().sum(axis=-1).max() < config.collapsed_mass:
-        return None
-    decision = planner.decide(*decide_args)
-    return None if decision.kind == "stop" else decision
+class Confirming:
+    """SYT's choice while a detection waits to be confirmed, for a baseline built on ``planner`` before
+    its first look. The belief has collapsed onto a detection once one coarse block holds
+    ``collapsed_mass`` of it and ``collapsed_gain`` times the most any block held at the start: a sharp
+    prior (``tables`` with one small surface) must not read as a detection from the first decision."""
+
+    def __init__(self, planner: SearchPlanner, config: BaselineConfig):
+        self.planner = planner
+        self.gate = max(config.collapsed_mass, config.collapsed_gain * _peak_block(planner))
+
+    def __call__(self, *decide_args) -> Decision | None:
+        if _peak_block(self.planner) < self.gate:
+            return None
+        decision = self.planner.decide(*decide_args)
+        return None if decision.kind == "stop" else decision
+
+
+def _peak_block(planner: SearchPlanner) -> float:
+    return float(planner.belief.coarse_mass().sum(axis=-1).max())
 
 
 def _within_budget(planner: SearchPlanner, decision: Decision, elapsed_s: float) -> Decision:
@@ -102,14 +116,14 @@ class _Tour:
 
     def __init__(self, planner: SearchPlanner, config: BaselineConfig):
         self.planner, self.config = planner, config
+        self._confirming = Confirming(planner, config)
         self.visited = np.zeros(len(planner.positions), bool)
         self.goal: int | None = None  # the position of the last move
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
                views: Views = ()) -> Decision:
-        decision = (confirming(self.planner, self.config, pose, pan_rad, tilt_rad, elapsed_s, occupancy,
-                               path_lengths_m, taken)
+        decision = (self._confirming(pose, pan_rad, tilt_rad, elapsed_s, occupancy, path_lengths_m, taken)
                     or self._look_around(pose, pan_rad, tilt_rad, taken)
                     or self._next_position(pose, occupancy, np.asarray(path_lengths_m, float)))
         return _within_budget(self.planner, decision, elapsed_s)
@@ -207,32 +221,33 @@ class Oracle:
 
     def __init__(self, planner: SearchPlanner, truth: Truth, config: BaselineConfig):
         self.planner, self.truth, self.config = planner, truth, config
+        self._confirming = Confirming(planner, config)
         self.goal: tuple[float, float] | None = None
         self._from_start: bool | None = None  # looking from where it started (None: not yet asked)
         self.tried: tuple[tuple[float, float], ...] = ()  # viewpoints whose looks did not find it
-        self.moves = self.looks = 0  # moves: to this viewpoint, that gained no ground
+        self.moves = 0  # moves to this viewpoint that gained no ground
+        self.looked = False  # from this viewpoint
         self._sent_from_m: float | None = None  # how far from its viewpoint the last move began
 
     def decide(self, pose: Pose2D, pan_rad: float, tilt_rad: float, elapsed_s: float, occupancy: OccupancyGrid,
                path_lengths_m: np.ndarray, taken: frozenset[int] = frozenset(),
                views: Views = ()) -> Decision:
         # another view, as the tours confirm: the same one again would show the same image
-        if confirm := confirming(self.planner, self.config, pose, pan_rad, tilt_rad, elapsed_s, occupancy,
-                                 path_lengths_m, taken, views):
+        if confirm := self._confirming(pose, pan_rad, tilt_rad, elapsed_s, occupancy, path_lengths_m, taken, views):
             self._sent_from_m = None  # SYT's move, not one toward the viewpoint
             return _within_budget(self.planner, confirm, elapsed_s)
         if self._from_start is None:
             self._from_start = self._seen_from((pose.x_m, pose.y_m))
             self.goal = (pose.x_m, pose.y_m) if self._from_start else None
-        if self.looks >= self.config.oracle_looks:
+        if self.looked:  # its look from here missed, and another from the same pose would show the same image
             if self._from_start:  # SPL's view missed: its own viewpoints are still all to try
                 self._from_start = False
             elif self.goal not in self.tried:  # asked again after stopping (the search's squeeze retry)
                 self.tried += (self.goal,)
             if len(self.tried) >= self.config.oracle_viewpoints:
-                return Decision("stop", f"oracle: {self.looks} looks from each of {len(self.tried)} viewpoints did "
-                                "not find it", status="exhausted")
-            self.goal, self.moves, self.looks = None, 0, 0
+                return Decision("stop", f"oracle: a look from each of {len(self.tried)} viewpoints did not find it",
+                                status="exhausted")
+            self.goal, self.moves, self.looked = None, 0, False
         if self.goal is None:
             self.goal = self._viewpoint((pose.x_m, pose.y_m))
         if self.goal is None:
@@ -244,7 +259,7 @@ class Oracle:
         if to_goal_m > self.config.arrived_m and self.moves < self.config.oracle_moves:
             self._sent_from_m = to_goal_m
             return _within_budget(self.planner, self._move(pose), elapsed_s)
-        self.looks += 1
+        self.looked = True
         return _within_budget(self.planner, self._look_from(pose, pan_rad, tilt_rad, 0.0), elapsed_s)
 
     def _viewpoint(self, start_xy: tuple[float, float]) -> tuple[float, float] | None:
