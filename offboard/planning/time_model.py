@@ -48,22 +48,23 @@ class TimeModel:
     def look(self, heading_rad: float, pan_rad: float, tilt_rad: float, azimuth_rad: float,
              target_tilt_rad: float) -> LookPlan:
         """Point at ``azimuth_rad`` (world) and ``target_tilt_rad``, turning the base only if needed."""
-        wanted = wrap_angle(azimuth_rad - heading_rad)
-        limit_lo, limit_hi = math.radians(self.pantilt.pan_min_deg), math.radians(self.pantilt.pan_max_deg)
-        pan = min(max(wanted, limit_lo), limit_hi)
-        turn = wrap_angle(wanted - pan)
-        slew = self.pantilt.slew_time_s(math.degrees(pan - pan_rad), math.degrees(target_tilt_rad - tilt_rad))
-        return LookPlan(turn, pan, target_tilt_rad, self.base.turn_time_s(turn) + slew + self.image_s)
+        pan, turn, time_s = self._pointing(heading_rad, pan_rad, tilt_rad, azimuth_rad, target_tilt_rad)
+        return LookPlan(float(turn), float(pan), target_tilt_rad, float(time_s))
 
     def look_times_s(self, heading_rad, pan_rad: float, tilt_rad: float, azimuths_rad: np.ndarray,
                      tilts_rad: np.ndarray) -> np.ndarray:
         """:meth:`look`'s time for every setting at once; ``heading_rad`` may be an array that
         broadcasts against the settings (one heading per candidate position, say)."""
-        wanted = np.angle(np.exp(1j * (np.asarray(azimuths_rad) - np.asarray(heading_rad))))  # wrapped
+        return self._pointing(heading_rad, pan_rad, tilt_rad, azimuths_rad, tilts_rad)[2]
+
+    def _pointing(self, heading_rad, pan_rad: float, tilt_rad: float, azimuths_rad, tilts_rad):
+        """The pan toward each azimuth (within the unit's limits), the base turn that makes up the rest,
+        and the look's time: turning, slewing from (``pan_rad``, ``tilt_rad``), the image."""
+        wanted = wrap_angle(np.asarray(azimuths_rad, float) - np.asarray(heading_rad, float))
         pan = np.clip(wanted, math.radians(self.pantilt.pan_min_deg), math.radians(self.pantilt.pan_max_deg))
-        turn = np.angle(np.exp(1j * (wanted - pan)))
+        turn = wrap_angle(wanted - pan)
         slew = self.pantilt.slew_time_s(np.degrees(pan - pan_rad), np.degrees(np.asarray(tilts_rad) - tilt_rad))
-        return self.base.turn_time_s(turn) + slew + self.image_s
+        return pan, turn, self.base.turn_time_s(turn) + slew + self.image_s
 
     def travel_s(self, path_length_m, turn_rad):
         """Drive a path of this length after turning towards it; inf for no path (numbers or arrays)."""
