@@ -34,6 +34,7 @@ from onboard.devices import DeviceFault, Devices, SimControl
 from shared import messages as m
 from shared.codec import ProtocolError, decode, encode
 from shared.keys import RobotKeys
+from shared.strict import StructureError
 
 log = logging.getLogger(__name__)
 
@@ -428,11 +429,18 @@ class Agent:
                     log.warning("not publishing while a device cannot be read: %s", exc)
                 down = True
                 continue
+            try:
+                odometry = encode(m.Odometry(seq, s.pose, s.speed_m_s, s.turn_rate_deg_s, s.base_moving, s.stalled,
+                                             s.robot_time_s))
+                pantilt = encode(m.PanTiltState(seq, s.pan_deg, s.tilt_deg, s.pantilt_moving, s.robot_time_s))
+            except StructureError as exc:  # a reading out of range: the planner would refuse it; skip the tick
+                if not down:
+                    log.warning("not publishing while a reading is out of range: %s", exc)
+                down = True
+                continue
             down = False
-            self._odometry_pub.put(encode(m.Odometry(seq, s.pose, s.speed_m_s, s.turn_rate_deg_s,
-                                                     s.base_moving, s.stalled, s.robot_time_s)))
-            self._pantilt_pub.put(encode(m.PanTiltState(seq, s.pan_deg, s.tilt_deg, s.pantilt_moving,
-                                                        s.robot_time_s)))
+            self._odometry_pub.put(odometry)
+            self._pantilt_pub.put(pantilt)
             seq += 1
 
     def _watchdog_loop(self) -> None:
@@ -487,7 +495,13 @@ class Agent:
     # --- replies -------------------------------------------------------------------------------------
 
     def _reply(self, query: zenoh.Query, message: object, arrays: str = "raw") -> None:
-        query.reply(query.key_expr, encode(message, arrays))
+        try:
+            payload = encode(message, arrays)
+        except StructureError as exc:  # a device read out of any range: say so, not leave the planner waiting
+            log.error("reply not sent: %s", exc)
+            self._reply_error(query, getattr(message, "command_id", ""), "device", f"the reply is out of range: {exc}")
+            return
+        query.reply(query.key_expr, payload)
         query.drop()
 
     def _reply_error(self, query: zenoh.Query, command_id: str, code: str, text: str) -> None:

@@ -16,7 +16,7 @@ import msgpack
 import numpy as np
 
 from shared.messages import MESSAGE_TYPES, SCHEMA_VERSION
-from shared.strict import StructureError, build, to_plain
+from shared.strict import StructureError, build, check, to_plain
 
 T = TypeVar("T")
 ArrayEncoding = Literal["raw", "png"]
@@ -31,10 +31,13 @@ class ProtocolError(StructureError):
 
 
 def encode(message: Any, arrays: ArrayEncoding = "raw") -> bytes:
-    """Serialise a message dataclass; ``arrays`` chooses how its image arrays travel."""
+    """Serialise a message dataclass; ``arrays`` chooses how its image arrays travel. A number out of its
+    field's range (or not finite) raises :class:`~shared.strict.StructureError` naming the field, as
+    :func:`decode` would on the other side."""
     name = type(message).__name__
     if MESSAGE_TYPES.get(name) is not type(message):
         raise TypeError(f"{name} is not a message type of shared.messages")
+    check(message)
     body = to_plain(message, lambda a: _encode_array(a, arrays))
     return msgpack.packb({"schema": SCHEMA_VERSION, "type": name, "body": body}, use_bin_type=True)
 

@@ -88,6 +88,26 @@ def build(cls: type, data: Any, error: type[StructureError] = StructureError, pa
         raise error(path, data, str(exc)) from None
 
 
+def check(obj: Any, error: type[StructureError] = StructureError, path: str = "") -> None:
+    """Check a dataclass that was built in code, not by :func:`build`: every number finite and within its
+    field's bounds, nested dataclasses too. For the side that sends: a message out of range fails where
+    it is made, naming the field, not only where it is received."""
+    for f in dataclasses.fields(obj):
+        _check_built(getattr(obj, f.name), _join(path, f.name), error, f)
+
+
+def _check_built(value: Any, where: str, error: type[StructureError], f: dataclasses.Field | None = None) -> None:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        check(value, error, where)
+    elif isinstance(value, (tuple, list)):
+        for i, item in enumerate(value):
+            _check_built(item, f"{where}[{i}]", error)
+    elif isinstance(value, float) and not math.isfinite(value):
+        raise error(where, value, "must be finite")
+    elif f is not None:
+        _check_bounds(f, value, where, error)
+
+
 def _join(path: str, name: str) -> str:
     return f"{path}.{name}" if path else name
 

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from shared import messages as m
 from shared.codec import MAX_PAYLOAD_BYTES, ProtocolError, decode, encode
 from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
+from shared.strict import StructureError
 
 POSE = m.PoseMsg(1.5, 2.0, 90.0)
 INTR = m.IntrinsicsMsg(8, 6, 5.0, 5.0, 3.5, 2.5)
@@ -181,10 +182,25 @@ def test_a_png_whose_header_disagrees_with_the_shape_is_refused_before_it_is_dec
 
 def test_a_robot_that_says_capture_takes_no_time_is_refused():
     """A look of 0 s would be worth infinitely much a second: the planner took it again and again."""
-    info = m.Info("c14", "syt", "sim", BaseLimits(), PanTiltLimits(), CameraTiming(capture_s=0.0), INTR, MOUNT, 1000)
+    envelope = msgpack.unpackb(encode(m.Info("c14", "syt", "sim", BaseLimits(), PanTiltLimits(), CameraTiming(),
+                                             INTR, MOUNT, 1000)))
+    envelope["body"]["camera"]["capture_s"] = 0.0  # as a robot of another build might send it
     with pytest.raises(ProtocolError) as err:
-        decode(encode(info), m.Info)
+        decode(msgpack.packb(envelope), m.Info)
     assert err.value.field == "camera.capture_s"
+
+
+@pytest.mark.parametrize("message, field", [
+    (m.LookCommand("x", 400.0, 0.0), "pan_deg"),
+    (m.LookCommand("x", 0.0, math.nan), "tilt_deg"),
+    (m.Info("c14", "syt", "sim", BaseLimits(), PanTiltLimits(), CameraTiming(capture_s=0.0), INTR, MOUNT, 1000),
+     "camera.capture_s"),
+])
+def test_a_message_out_of_range_is_refused_where_it_is_made(message, field):
+    """The sender's bug is named on the sender's side, not left for the other process to report."""
+    with pytest.raises(StructureError) as err:
+        encode(message)
+    assert err.value.field == field
 
 
 def test_a_payload_over_the_limit_is_refused_before_it_is_unpacked(monkeypatch):
