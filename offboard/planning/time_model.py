@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shared.geometry import wrap_angle
 from shared.limits import BaseLimits, CameraTiming, PanTiltLimits
 
 
@@ -60,9 +59,9 @@ class TimeModel:
     def _pointing(self, heading_rad, pan_rad: float, tilt_rad: float, azimuths_rad, tilts_rad):
         """The pan toward each azimuth (within the unit's limits), the base turn that makes up the rest,
         and the look's time: turning, slewing from (``pan_rad``, ``tilt_rad``), the image."""
-        wanted = wrap_angle(np.asarray(azimuths_rad, float) - np.asarray(heading_rad, float))
+        wanted = _wrapped(np.asarray(azimuths_rad, float) - np.asarray(heading_rad, float))
         pan = np.clip(wanted, math.radians(self.pantilt.pan_min_deg), math.radians(self.pantilt.pan_max_deg))
-        turn = wrap_angle(wanted - pan)
+        turn = _wrapped(wanted - pan)
         slew = self.pantilt.slew_time_s(np.degrees(pan - pan_rad), np.degrees(np.asarray(tilts_rad) - tilt_rad))
         return pan, turn, self.base.turn_time_s(turn) + slew + self.image_s
 
@@ -77,3 +76,8 @@ class TimeModel:
         t = self.base.turn_time_s(turn_rad) + drive
         t = np.where(reachable, t, np.inf)
         return float(t) if t.ndim == 0 else t
+
+
+def _wrapped(angle_rad: np.ndarray) -> np.ndarray:
+    """Angles wrapped to (-pi, pi]."""
+    return np.angle(np.exp(1j * angle_rad))
