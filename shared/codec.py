@@ -31,9 +31,9 @@ class ProtocolError(StructureError):
 
 
 def encode(message: Any, arrays: ArrayEncoding = "raw") -> bytes:
-    """Serialise a message dataclass; ``arrays`` chooses how its image arrays travel. A number out of its
-    field's range (or not finite) raises :class:`~shared.strict.StructureError` naming the field, as
-    :func:`decode` would on the other side."""
+    """Serialise a message dataclass; ``arrays`` chooses how its image arrays travel. What :func:`decode`
+    would refuse on the other side (a wrong type, an option not offered, a number out of range or not
+    finite) raises :class:`~shared.strict.StructureError` here, naming the field."""
     name = type(message).__name__
     if MESSAGE_TYPES.get(name) is not type(message):
         raise TypeError(f"{name} is not a message type of shared.messages")

@@ -88,24 +88,16 @@ def build(cls: type, data: Any, error: type[StructureError] = StructureError, pa
         raise error(path, data, str(exc)) from None
 
 
-def check(obj: Any, error: type[StructureError] = StructureError, path: str = "") -> None:
-    """Check a dataclass that was built in code, not by :func:`build`: every number finite and within its
-    field's bounds, nested dataclasses too. For the side that sends: a message out of range fails where
-    it is made, naming the field, not only where it is received."""
-    for f in dataclasses.fields(obj):
-        _check_built(getattr(obj, f.name), _join(path, f.name), error, f)
+def check(obj: Any, error: type[StructureError] = StructureError) -> None:
+    """Check a dataclass built in code, not by :func:`build`, as :func:`build` checks plain data (types,
+    options, ranges, finiteness, the class's own checks), on the plain values it would travel as
+    (:func:`to_plain`: a numpy scalar as the number it is); arrays pass as they are. For the side
+    that sends: a message out of range fails where it is made, naming the field."""
+    build(type(obj), to_plain(obj, _as_is), error, "", lambda value, where: value)
 
 
-def _check_built(value: Any, where: str, error: type[StructureError], f: dataclasses.Field | None = None) -> None:
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        check(value, error, where)
-    elif isinstance(value, (tuple, list)):
-        for i, item in enumerate(value):
-            _check_built(item, f"{where}[{i}]", error)
-    elif isinstance(value, float) and not math.isfinite(value):
-        raise error(where, value, "must be finite")
-    elif f is not None:
-        _check_bounds(f, value, where, error)
+def _as_is(array: np.ndarray) -> np.ndarray:
+    return array
 
 
 def _join(path: str, name: str) -> str:

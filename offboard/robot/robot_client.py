@@ -126,11 +126,12 @@ class RobotClient:
 
     def _motion_timeout_s(self, turn_deg: float, distance_m: float, speed_m_s: float | None) -> float:
         """Generous: the robot's own time for the motion at the speed asked (when paced in real time) and a
-        margin; at most an hour, so that an absurd distance reaches the robot and is refused there by name."""
+        margin; at most an hour, so that an absurd distance reaches the robot and is refused there by name
+        (one outside the message's range, or not finite, is refused here, by the encoder)."""
         info = self._info or self.info()
         expected = (info.base.turn_time_s(math.radians(turn_deg))
                     + info.base.drive_time_s(distance_m, speed_m_s))
-        return min(_LONGEST_MOTION_S, 2.0 * expected + 10.0)  # in this order, NaN gives the hour too
+        return min(_LONGEST_MOTION_S, 2.0 * expected + 10.0)
 
     def _look_timeout_s(self) -> float:
         """The head's slowest slew, corner to corner at the unit's own speeds, twice, and the capture's margin."""

@@ -366,9 +366,14 @@ def test_a_slow_move_in_real_time_is_waited_for_and_an_absurd_one_refused_by_nam
         # (12.3 s) and gave up on a robot still driving
         result = robot.move(distance_m=0.1, speed_m_s=0.007)
         assert result.status == "done" and result.distance_m == pytest.approx(0.1, abs=0.01)
-        for absurd in (math.inf, math.nan):  # refused where it is made (the agent's own refusal: raw payloads below)
-            with pytest.raises(StructureError, match="distance_m"):
+        for absurd in (math.inf, math.nan):
+            with pytest.raises(StructureError, match="distance_m"):  # refused where it is made
                 robot.move(distance_m=absurd)
+            envelope = msgpack.unpackb(encode(m.MoveCommand("absurd", distance_m=1.0)))
+            envelope["body"]["distance_m"] = absurd  # ... and by the agent, from a sender that does not check
+            (reply,) = robot.session.get(robot.keys.move, payload=msgpack.packb(envelope), timeout=5.0)
+            error = decode(reply.err.payload.to_bytes(), m.ErrorReply)
+            assert error.code == "protocol" and "distance_m" in error.message
 
 
 @pytest.mark.parametrize("content", [None, "{ not json5"])

@@ -193,6 +193,10 @@ def test_a_robot_that_says_capture_takes_no_time_is_refused():
 @pytest.mark.parametrize("message, field", [
     (m.LookCommand("x", 400.0, 0.0), "pan_deg"),
     (m.LookCommand("x", 0.0, math.nan), "tilt_deg"),
+    (m.LookCommand("x", np.float32(400.0), 0.0), "pan_deg"),  # a numpy number travels as the number it is
+    (m.LookCommand("x", True, 0.0), "pan_deg"),
+    (m.Heartbeat("p", np.int64(-1)), "seq"),
+    (m.SimFault("f", "gripper", 0.0), "device"),
     (m.Info("c14", "syt", "sim", BaseLimits(), PanTiltLimits(), CameraTiming(capture_s=0.0), INTR, MOUNT, 1000),
      "camera.capture_s"),
 ])
