@@ -416,7 +416,7 @@ class Agent:
                             head.moving, base.stalled, self.devices.clock.now_s())
 
     def _publish_loop(self) -> None:
-        period, seq, down = 1.0 / self.config.publish_hz, 0, False
+        period, seq, why_not = 1.0 / self.config.publish_hz, 0, ""  # why_not: why the last tick published nothing
         due = time.monotonic() + period
         while not self._shutdown.wait(max(0.0, due - time.monotonic())):
             # A fixed schedule: a late wake-up shortens the next wait instead of slowing the rate
@@ -424,21 +424,18 @@ class Agent:
             due = max(due + period, time.monotonic())
             try:
                 s = self.state()
-            except DeviceFault as exc:  # a serial link down: nothing true to publish until it is back
-                if not down:
-                    log.warning("not publishing while a device cannot be read: %s", exc)
-                down = True
-                continue
-            try:
                 odometry = encode(m.Odometry(seq, s.pose, s.speed_m_s, s.turn_rate_deg_s, s.base_moving, s.stalled,
                                              s.robot_time_s))
                 pantilt = encode(m.PanTiltState(seq, s.pan_deg, s.tilt_deg, s.pantilt_moving, s.robot_time_s))
-            except StructureError as exc:  # a reading out of range: the planner would refuse it; skip the tick
-                if not down:
-                    log.warning("not publishing while a reading is out of range: %s", exc)
-                down = True
+            except (DeviceFault, StructureError) as exc:  # a serial link down, or a reading the planner would refuse
+                cause = "a device fault" if isinstance(exc, DeviceFault) else "a reading out of range"
+                if cause != why_not:
+                    log.warning("not publishing (%s): %s", cause, exc)
+                why_not = cause
                 continue
-            down = False
+            if why_not:
+                log.info("publishing again after %s", why_not)
+                why_not = ""
             self._odometry_pub.put(odometry)
             self._pantilt_pub.put(pantilt)
             seq += 1
