@@ -81,12 +81,15 @@ class BaselineContext:
 class Confirming:
     """SYT's choice while a detection waits to be confirmed, for a baseline built on ``planner`` before
     its first look. The belief has collapsed onto a detection once one coarse block holds
-    ``collapsed_mass`` of it and ``collapsed_gain`` times the most any block held at the start: a sharp
-    prior (``tables`` with one small surface) must not read as a detection from the first decision."""
+    ``collapsed_mass`` of it and ``collapsed_gain`` times the most any block held at the start, or half
+    the way from that to all of it, whichever is less: a sharp prior (``tables`` with one small
+    surface) must not read as a detection from the first decision, and one whose block holds half the
+    belief must still let a detection through."""
 
     def __init__(self, planner: SearchPlanner, config: BaselineConfig):
         self.planner = planner
-        self.gate = max(config.collapsed_mass, config.collapsed_gain * _peak_block(planner))
+        start = _peak_block(planner)
+        self.gate = max(config.collapsed_mass, min(config.collapsed_gain * start, (1.0 + start) / 2))
 
     def __call__(self, *decide_args) -> Decision | None:
         if _peak_block(self.planner) < self.gate:

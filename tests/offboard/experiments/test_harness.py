@@ -19,6 +19,7 @@ from offboard.experiments import harness as experiment
 from offboard.navigation import grid_planner
 from offboard.experiments.baselines import BASELINES, BaselineContext
 from offboard.experiments.calibration import LOOKS_FILE, read_looks
+from offboard.planning.action_values import block_centers
 from offboard.planning.belief import TargetBelief
 from offboard.perception.detectability import DetectabilityTable
 from offboard.experiments.harness import PAPER, Run, build_runs, make_row
@@ -553,9 +554,23 @@ def test_a_prior_as_sharp_as_a_detection_leaves_the_baseline_its_own_choices(nam
     assert any(own in d.reason for own in ("look around", "oracle:"))
 
 
-def _gather_belief(planner) -> None:
+def test_a_detection_still_hands_over_when_the_prior_holds_most_of_the_belief_in_one_block():
+    planner = _planner()
+    blocks = block_centers(planner.belief)
+    centre = blocks[np.argmin(np.linalg.norm(blocks - (3.0, 2.4, 0.9), axis=1))]
+    _gather_belief(planner, 0.07, centre)
+    start = planner.belief.coarse_mass().sum(axis=-1).max()
+    assert start > 0.5  # twice it would be out of reach
+    policy = BASELINES["exhaustive"](BaselineContext(truth=TRUTH))(planner)
+    _gather_belief(planner, 0.01, centre)  # a detection there
+    assert planner.belief.coarse_mass().sum(axis=-1).max() > (1 + start) / 2
+    d = _decide(policy, planner, Pose2D(3.0, 1.2, 0.0))
+    assert d.kind == "look" and "look around" not in d.reason
+
+
+def _gather_belief(planner, sigma_m: float = 0.1, centre_m=(3.0, 2.4, 0.9)) -> None:
     centres = planner.belief.grid.centers()
-    planner.belief.set_prior(np.exp(-0.5 * np.sum((centres - (3.0, 2.4, 0.9)) ** 2, axis=-1) / 0.1**2), 0.0)
+    planner.belief.set_prior(np.exp(-0.5 * np.sum((centres - centre_m) ** 2, axis=-1) / sigma_m**2), 0.0)
 
 
 @pytest.mark.parametrize("jobs", [1, 2, 8])
