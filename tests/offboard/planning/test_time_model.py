@@ -33,6 +33,14 @@ def test_an_azimuth_beyond_the_pan_limit_turns_the_base_the_rest():
     assert plan.time_s == pytest.approx(2 * math.sqrt(0.11) + 0.6)
 
 
+@pytest.mark.parametrize("azimuth", [math.pi, -math.pi, 0.3, -2.9])
+def test_a_look_is_timed_as_the_planner_times_it(azimuth):
+    """One pointing rule for both, right behind the robot too, where the old look() turned the other way."""
+    settings = np.array([azimuth, 1.0])
+    times = TIME.look_times_s(0.0, 0.5, 0.0, settings, np.zeros(2))
+    assert TIME.look(0.0, 0.5, 0.0, azimuth, 0.0).time_s == times[0]
+
+
 def test_the_tilt_slew_is_priced():
     # 30° tilt: 0.5 + 0.2 s, settling 0.1 s
     times = TIME.look_times_s(0.0, 0.0, 0.0, np.zeros(2), np.radians([0.0, 30.0]))
