@@ -8,7 +8,11 @@ The generator (``onboard.sim.world_generator``) runs this on every world before 
 - **a seeing pose** among those cells: the camera within 0.6-2.5 m of the picture's centre and within
   40° of its normal, the tilt that aims at it inside the PTU-D46's limits (or the picture's centre
   still in the image at the limit), and the simulator's own renderer showing the picture there: the
-  depth at its centre and at four points around it is the picture's, not something in front of it.
+  depth at its centre and at its corners drawn in by a tenth is the picture's, not something in front
+  of it. Those are the points SPL's yardstick asks to see in plain view
+  (``offboard.experiments.world_facts.Truth.picture_points``), so a world that passes is one it can
+  score: with probes 0.6 of the way to the corners, a picture set back on a high shelf passed with its
+  bottom edge hidden by the shelf's front from every floor pose, and SPL saw it from nowhere.
 
 A world that fails raises ``WorldRejected`` with the reason.
 """
@@ -31,7 +35,7 @@ from shared.world import World
 # The offboard navigator's DRIVE_CLEARANCE_M (offboard.experiments.world_facts); onboard cannot import it.
 DRIVE_CLEARANCE_M = 0.31
 GRID_M = 0.05
-_SAMPLE_FRACTION = 0.6  # the four other depth probes: this far from the centre towards each corner
+PICTURE_INSET = 0.9  # the four other depth probes: this far from the centre towards each corner (SPL's)
 
 Rect = tuple[tuple[float, float], tuple[float, float]]  # (x0, y0), (x1, y1) on the floor
 
@@ -143,10 +147,10 @@ def check_world(world: World, camera: CameraConfig = CameraConfig(), pantilt: Pa
 
 
 def picture_probes(world: World) -> np.ndarray:
-    """Points (5, 3) on the picture: its centre, then four around it."""
+    """Points (5, 3) on the picture: its centre, then its corners drawn in by ``PICTURE_INSET``."""
     corners = world.target.picture_corners_m()
     centre = corners.mean(axis=0)
-    return np.vstack([centre, centre + _SAMPLE_FRACTION * (corners - centre)])
+    return np.vstack([centre, centre + PICTURE_INSET * (corners - centre)])
 
 
 def _candidate_poses(world: World, floor: FloorGrid, camera: CameraConfig, pantilt: PanTiltLimits,

@@ -18,6 +18,7 @@ from offboard.perception.detectability import DetectabilityTable
 from offboard.perception.detection.detector import shipped_table
 from offboard.planning.priors import HintsFile
 from shared.config import load_config
+from shared.world import suite_worlds
 
 # a 6 × 5 m room; a 2.1 m shelf against the north wall with the target on top, its picture facing the room
 SHELF = Obstacle((2.5, 4.69, 0.0), (3.5, 5.0, 1.9))  # the picture 5 mm in front of its edge
@@ -124,6 +125,20 @@ yaw_deg = -90
 start = [5.0, 2.0]
 heading_deg = 90
 """
+
+
+@pytest.mark.parametrize("suite", ["dev", "test"])
+def test_spl_sees_the_target_of_every_shipped_generated_world(suite):
+    """The generator's check promises a seeing pose; SPL's yardstick must find one too, or every
+    method scores 0 there however soon it finds the target."""
+    criteria = SeeingCriteria()
+    unseen = []
+    for path in suite_worlds(suite):
+        facts = load_facts(str(path))
+        truth = facts.truth(facts.target)
+        if not seeing_cells(truth, true_floor_map(truth, criteria), criteria).any():
+            unseen.append(path.stem)
+    assert unseen == []
 
 
 def test_a_generated_world_without_tables_runs_on_its_own_target(tmp_path):

@@ -147,6 +147,13 @@ def test_a_target_hidden_behind_a_box_is_rejected(written):
         check_world(_world(_boxed_in(data)))
 
 
+def test_a_picture_whose_bottom_edge_a_shelf_front_hides_is_rejected():
+    """The corners SPL's yardstick must see are the ones the check probes (dev's old room-1000-28)."""
+    world = load_world(Path(__file__).with_name("picture-set-back-on-a-high-shelf.toml"))
+    with pytest.raises(WorldRejected, match="hides the target"):
+        check_world(world)
+
+
 def test_a_start_near_the_target_or_walled_in_is_rejected(written):
     worlds = [load_world(p) for p in written]
     world = max(worlds, key=lambda w: w.start.distance_to(*w.target.position_m[:2]))
