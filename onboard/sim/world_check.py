@@ -8,11 +8,10 @@ The generator (``onboard.sim.world_generator``) runs this on every world before 
 - **a seeing pose** among those cells: the camera within 0.6-2.5 m of the picture's centre and within
   40° of its normal, the tilt that aims at it inside the PTU-D46's limits (or the picture's centre
   still in the image at the limit), and the simulator's own renderer showing the picture there: the
-  depth at its centre and at its corners drawn in by a tenth is the picture's, not something in front
-  of it. Those are the points SPL's yardstick asks to see in plain view
-  (``offboard.experiments.world_facts.Truth.picture_points``), so a world that passes is one it can
-  score: with probes 0.6 of the way to the corners, a picture set back on a high shelf passed with its
-  bottom edge hidden by the shelf's front from every floor pose, and SPL saw it from nowhere.
+  depth at its centre and at its corners drawn in by a tenth is the picture's (within 1 cm), not
+  something in front of it. Those are the points SPL's yardstick asks to see in plain view
+  (``offboard.experiments.world_facts.Truth.picture_points``), so that it can score every world that
+  passes: a picture set back on a high shelf, its bottom edge hidden by the shelf's front, is not.
 
 A world that fails raises ``WorldRejected`` with the reason.
 """
@@ -51,7 +50,7 @@ class SeeingRule:
     near_m: float = 0.6
     far_m: float = 2.5
     max_off_normal_deg: float = 40.0
-    depth_tolerance_m: float = 0.03  # the renderer's depth against the picture's: a hit, not an occluder
+    depth_tolerance_m: float = 0.01  # the renderer's depth against the picture's: a hit, not an occluder
     image_margin_px: float = 20.0  # the picture's centre at least this far inside the image
     max_renders: int = 10  # candidate poses rendered before the world is declared unseeable
     min_start_distance_m: float = 1.0  # the start may not already be this close to the target
