@@ -389,7 +389,19 @@ def _prepare(runs: list[Run], out: Path) -> dict[str, tuple[WorldFacts, Path, Pa
                 log.warning("prior tables in %s: one surface holds all its mass, so it tells the planner where "
                             "the target is", world.name)
         prepared[name] = (world, picture, hint_file)
+    for world, start, target in unscorable(runs, {n: facts for n, (facts, _, _) in prepared.items()}):
+        log.warning("%s from (%s): no position the robot can drive to sees the target at (%s) by SPL's rule "
+                    "(the detector's rate ≥ 0.8, the whole picture in plain view), so its runs score SPL 0 "
+                    "however soon they find it", world, _fmt(start), _fmt(target))
     return prepared
+
+
+def unscorable(runs: list[Run], worlds: dict[str, WorldFacts]) -> list[tuple[str, Start, Placement]]:
+    """The scenarios (world, start, target) of ``runs`` whose SPL has no shortest path: said before the
+    sweep, so that a room of one's own is not read from its SPL alone."""
+    scenarios = sorted({(r.world, r.start, r.target) for r in runs})
+    return [(name, start, target) for name, start, target in scenarios
+            if not math.isfinite(viewpoint(worlds[name].truth(target), start[:2])[1])]
 
 
 def _check_worlds(paths: list[str]) -> None:
