@@ -283,8 +283,8 @@ def test_a_tables_prior_with_one_table_is_flagged_as_giving_the_target_away(tmp_
 def test_a_scenario_spl_cannot_score_is_named_before_the_sweep(tmp_path, caplog):
     """dev's old room-1000-28: a picture no drivable position sees whole, beside a room that is fine."""
     unseen = Path(__file__).parents[2] / "onboard" / "sim" / "picture-set-back-on-a-high-shelf.toml"
-    runs = [Run("syt", str(path), load_facts(str(path)).start, load_facts(str(path)).target, 3, "uniform", 0)
-            for path in (unseen, "test/room-2000-0")]
+    worlds = [load_facts(str(path)) for path in (unseen, "test/room-2000-0")]
+    runs = [Run("syt", str(world.path), world.start, world.target, 3, "uniform", 0) for world in worlds]
     experiment._prepare(runs, tmp_path / "out")
     warned = [r.getMessage() for r in caplog.records if "by SPL's rule" in r.getMessage()]
     assert len(warned) == 1 and warned[0].startswith(f"{unseen} from (") and "score SPL 0" in warned[0]
