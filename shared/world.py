@@ -65,6 +65,8 @@ WORLDS_DIR = Path(__file__).parent / "worlds"
 FLOOR_OBSTACLE_MAX_Z_M = 1.5
 DEFAULT_ROBOT_RADIUS_M = 0.26
 MAX_ROOM_SIDE_M = 100.0  # a building's floor, well inside the wire's poses; the planner holds its region to it
+PICTURE_INSET = 0.9  # a picture is in plain view when its centre and its corners drawn in by this are:
+# the simulator's world check probes these points, and SPL's yardstick asks for them
 _TOL_M = 1e-3  # contact tolerance: resting on a surface or touching a wall is not an overlap
 
 Vec3 = tuple[float, float, float]

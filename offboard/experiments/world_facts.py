@@ -29,7 +29,7 @@ from shared import toml_writer
 from shared.geometry import HeadMount
 from shared.limits import PanTiltLimits
 from shared.strict import bounds
-from shared.world import Box, WorldError, is_bundled_room, load_world, resolve_world, support_of
+from shared.world import PICTURE_INSET, Box, WorldError, is_bundled_room, load_world, resolve_world, support_of
 
 Vec3 = tuple[float, float, float]
 Start = tuple[float, float, float]  # x, y, heading° (the agent's --start)
@@ -88,7 +88,7 @@ class Truth:
         half = self.target_depth_m / 2
         return np.array([x + normal[0] * half, y + normal[1] * half, z])
 
-    def picture_points(self, normal: np.ndarray, inset: float = 0.9) -> np.ndarray:
+    def picture_points(self, normal: np.ndarray, inset: float = PICTURE_INSET) -> np.ndarray:
         """The picture's centre and its corners drawn in by ``inset`` (5, 3): what must be in plain view
         (the bottom corners then clear the surface the target stands on)."""
         centre = self.face_centre(normal)

@@ -10,8 +10,8 @@ The generator (``onboard.sim.world_generator``) runs this on every world before 
   still in the image at the limit), and the simulator's own renderer showing the picture there: the
   depth at its centre and at its corners drawn in by a tenth is the picture's (within 1 cm), not
   something in front of it. Those are the points SPL's yardstick asks to see in plain view
-  (``offboard.experiments.world_facts.Truth.picture_points``), so that it can score every world that
-  passes: a picture set back on a high shelf, its bottom edge hidden by the shelf's front, is not.
+  (``shared.world.PICTURE_INSET``), so that it can score every world that passes: a picture set back
+  on a high shelf, its bottom edge hidden by the shelf's front, is not.
 
 A world that fails raises ``WorldRejected`` with the reason.
 """
@@ -29,12 +29,11 @@ from onboard.config import CameraConfig
 from onboard.sim.render import StereoRenderer
 from shared.geometry import Pose2D, RigidTransform
 from shared.limits import PanTiltLimits
-from shared.world import World
+from shared.world import PICTURE_INSET, World
 
 # The offboard navigator's DRIVE_CLEARANCE_M (offboard.experiments.world_facts); onboard cannot import it.
 DRIVE_CLEARANCE_M = 0.31
 GRID_M = 0.05
-PICTURE_INSET = 0.9  # the four other depth probes: this far from the centre towards each corner (SPL's)
 
 Rect = tuple[tuple[float, float], tuple[float, float]]  # (x0, y0), (x1, y1) on the floor
 

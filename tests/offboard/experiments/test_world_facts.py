@@ -3,7 +3,6 @@ and a generated world (its target on a shelf, no table) still gives scenarios.""
 
 from __future__ import annotations
 
-import inspect
 import math
 
 import numpy as np
@@ -18,7 +17,6 @@ from offboard.experiments.world_facts import (ARRIVAL_MARGIN_M, Obstacle, Seeing
 from offboard.perception.detectability import DetectabilityTable
 from offboard.perception.detection.detector import shipped_table
 from offboard.planning.priors import HintsFile
-from onboard.sim.world_check import PICTURE_INSET
 from shared.config import load_config
 from shared.world import suite_worlds
 
@@ -139,10 +137,6 @@ def test_spl_sees_the_target_of_every_shipped_generated_world_from_its_start(sui
         if not math.isfinite(viewpoint(facts.truth(facts.target), facts.start[:2])[1]):
             unseen.append(path.stem)
     assert unseen == []
-
-
-def test_the_generators_check_probes_the_points_spl_must_see():
-    assert PICTURE_INSET == inspect.signature(Truth.picture_points).parameters["inset"].default
 
 
 def test_a_generated_world_without_tables_runs_on_its_own_target(tmp_path):
