@@ -175,7 +175,9 @@ class Search:
                  policy: Callable[[SearchPlanner], Policy] | None = None):
         self.robot = robot
         self.config = config
-        self.detectors = detectors
+        # the belief's facing sectors stand for every facing in them (DetectabilityTable.for_sectors)
+        self.detectors = {name: (detector, table.for_sectors(config.facing_sectors))
+                          for name, (detector, table) in detectors.items()}
         self.dynamic_priors = dynamic
         self.recorder = recorder
         self.target_depth_m = target_depth_m

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from offboard.perception.detection.detector import Detection
+from offboard.perception.detection.detector import Detection, shipped_table
 from offboard.planning.priors import HintBox, hints
 
 pytestmark = pytest.mark.integration
@@ -32,3 +32,12 @@ def test_a_detection_without_depth_is_placed_on_its_rays_not_where_a_strong_prio
     ray = (search.state.estimate_m - camera.translation) @ camera.rotation  # in the camera's frame
     u, v = obs.intrinsics.project(ray)
     assert ray[2] > 0 and box[0] - 5 <= u <= box[2] + 5 and box[1] - 5 <= v <= box[3] + 5, (u, v)
+
+
+def test_the_search_plans_and_updates_with_a_sectors_rate_not_its_centres(lab_search):
+    search = lab_search
+    measured = shipped_table("sift")
+    assert search.belief.facing_sectors == 8
+    for table in (search.planner.table, search.detectors["sift"][1]):
+        assert table.facing_edges_deg[-1] == 120.0  # a 45° sector's near edge shows up to 112.5° off its centre
+        assert np.allclose(table.rate, measured.for_sectors(8).rate)
