@@ -106,7 +106,7 @@ def _scene() -> _Scene:
     uniform prior, the robot at the world's start."""
     world = load_world(WORLD)
     config = dataclasses.replace(SearchConfig(), room_m=world.room.size_m)
-    table = shipped_table(config.detector)
+    table = shipped_table(config.detector).for_sectors(config.facing_sectors)
     prior = build_prior(VoxelGrid(config.room_m, config.resolution_m), ["uniform"])
     depth_m = world.target.size_m[0]  # along the picture's normal, as the search is given it
     occupancy, belief = starting_maps(config, prior, depth_m)

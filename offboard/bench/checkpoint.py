@@ -45,7 +45,7 @@ def realistic_state(looks: int = LOOKS, seed: int = 0) -> tuple[TargetBelief, Oc
     grid = VoxelGrid(ROOM_M, 0.05)
     occupancy = OccupancyGrid(grid)
     belief = TargetBelief(grid, facing_sectors=8, prob_outside=0.05, coarse_factor=4)
-    table = shipped_table("sift")
+    table = shipped_table("sift").for_sectors(belief.facing_sectors)
     rng = np.random.default_rng(seed)
     config = SearchConfig()
     for _ in range(looks):

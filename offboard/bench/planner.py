@@ -58,7 +58,8 @@ def _scenario(resolution_m: float, room_m: tuple[float, float, float] = ROOM_M) 
     belief = TargetBelief(grid, coarse_factor=planning_block_factor(config))
     belief.set_prior(hints(grid, TABLES), prob_outside=config.prob_outside)
     time_model = TimeModel(BASE, PanTiltLimits(), CameraTiming())
-    planner = SearchPlanner(belief, config.planner, shipped_table("sift"), time_model, K, MOUNT)
+    planner = SearchPlanner(belief, config.planner, shipped_table("sift").for_sectors(belief.facing_sectors), time_model,
+                            K, MOUNT)
     return planner, occupancy
 
 

@@ -64,12 +64,12 @@ class DetectabilityTable:
         return replace(self, distance_edges_m=self.distance_edges_m * (face_size_m / self.face_size_m),
                        face_size_m=face_size_m)
 
-    def for_sectors(self, sectors: int, samples: int = 9) -> DetectabilityTable:
+    def for_sectors(self, sectors: int, steps: int = 9) -> DetectabilityTable:
         """This table for a belief that splits the facing into ``sectors`` equal sectors (1: the
         target faces the camera; then the table as it is). The planner and the update look a
         sector's rate up at the angle to its centre, yet its mass stands for every facing in it. So
         the rate at an angle becomes the mean of the measured rate over the sector around it,
-        ``samples`` facings across the sector for each of ``samples`` angles across the bin. The
+        ``steps`` facings across the sector for each of ``steps`` angles across the bin. The
         spread is taken in the horizontal: an approximation for steep views. With SIFT's table at
         1.5 m and 8 sectors: seen 50-60° off its centre a sector is found at 0.77, not 0.95 (its far
         edge is past 70°); 80-90° off, at 0.17, not 0 (its near edge is at 58-68°). Without this, a
@@ -83,17 +83,19 @@ class DetectabilityTable:
         step = self.facing_edges_deg[1] - self.facing_edges_deg[0]
         top = min(180.0, step * math.ceil((self.facing_edges_deg[-1] + width / 2) / step - 1e-9))
         edges = np.arange(0.0, top + step / 2, step)
-        within_bin = (np.arange(samples) + 0.5) / samples * step
-        across = ((np.arange(samples) + 0.5) / samples - 0.5) * width
+        within_bin = (np.arange(steps) + 0.5) / steps * step
+        across = ((np.arange(steps) + 0.5) / steps - 0.5) * width
         angle = np.abs(edges[:-1, None, None] + within_bin[None, :, None] + across[None, None, :])
         angle = np.where(angle > 180.0, 360.0 - angle, angle).reshape(len(edges) - 1, -1)
         d, o = (np.arange(n) for n in self.rate.shape[:2])
         idx = np.floor((angle - self.facing_edges_deg[0]) / step).astype(int)
-        inside = idx < self.rate.shape[2]
-        cells = (d[:, None, None, None], o[None, :, None, None], np.minimum(idx, self.rate.shape[2] - 1)[None, None])
+        inside = (idx >= 0) & (idx < self.rate.shape[2])
+        cells = (d[:, None, None, None], o[None, :, None, None], np.clip(idx, 0, self.rate.shape[2] - 1)[None, None])
         rate = np.where(inside[None, None], self.rate[cells], 0.0).mean(axis=-1)
         views = np.where(inside[None, None], self.samples[cells], 0).max(axis=-1)  # behind the cells it averages
-        return replace(self, facing_edges_deg=edges, rate=rate, samples=views)
+        # facings that are never found are left off the axis: a kernel bins every facing it scans
+        used = max(1, int(np.nonzero(rate.max(axis=(0, 1)) > 0)[0].max(initial=0)) + 1)
+        return replace(self, facing_edges_deg=edges[:used + 1], rate=rate[..., :used], samples=views[..., :used])
 
     @property
     def range_m(self) -> tuple[float, float]:

@@ -129,9 +129,11 @@ def test_a_table_with_an_impossible_rate_or_cost_is_refused_by_name(field, value
         dataclasses.replace(shipped("sift"), **{field: value})
 
 
-def _step_table(max_facing_deg: float) -> DetectabilityTable:
-    """Found for sure at 1-2 m up to ``max_facing_deg`` off the normal, never beyond."""
-    facing = np.arange(0.0, 91.0, 10.0)
+
+def _step_table(max_facing_deg: float, axis_deg: float = 90.0) -> DetectabilityTable:
+    """Found for sure at 1-2 m up to ``max_facing_deg`` off the normal, never beyond (nor past the
+    facing axis, ``axis_deg``)."""
+    facing = np.arange(0.0, axis_deg + 1.0, 10.0)
     rate = np.zeros((1, 1, len(facing) - 1))
     rate[..., facing[1:] <= max_facing_deg] = 1.0
     return DetectabilityTable("step", np.array([1.0, 2.0]), np.array([0.0, 35.0]), facing, rate,
@@ -139,15 +141,24 @@ def _step_table(max_facing_deg: float) -> DetectabilityTable:
 
 
 def test_a_sector_is_found_as_often_as_the_facings_in_it_on_average():
-    table = _step_table(60.0).for_sectors(8)  # 45° sectors
+    table = _step_table(90.0).for_sectors(8)  # 45° sectors; found from any facing the axis measures
     rate = table.rate[0, 0]
     centre = (table.facing_edges_deg[:-1] + table.facing_edges_deg[1:]) / 2
-    # the share of the sector within 60° of the view, at the bin's centre
-    share = np.clip((60.0 - (centre - 22.5)) / 45.0, 0.0, 1.0)
-    assert table.facing_edges_deg[-1] >= 90.0 + 22.5  # a sector's near edge shows past 90° off its centre
-    assert np.allclose(rate, share, atol=0.06)
-    assert rate[centre < 37.5].min() == 1.0 and rate[centre > 82.5].max() == 0.0
-    assert 0.0 < rate[(centre > 60) & (centre < 80)].min() < rate[(centre > 40) & (centre < 60)].max() < 1.0
+    share = np.clip((90.0 - (centre - 22.5)) / 45.0, 0.0, 1.0)  # of the sector within 90° of the view
+    assert table.facing_edges_deg[-1] == 110.0  # a look 100-110° off a sector's centre sees its near edge
+    assert np.allclose(rate, share, atol=0.02)  # and past the measured 90°, nothing is found
+    assert rate[centre < 67.5].min() == 1.0 and 0.1 < rate[-1] < 0.2
+
+
+def test_a_facing_past_half_a_turn_is_the_same_angle_the_other_way():
+    table = _step_table(180.0, axis_deg=180.0).for_sectors(2)  # found from every side, 180° sectors
+    assert table.facing_edges_deg[-1] == 180.0 and np.all(table.rate == 1.0)
+
+
+def test_facings_a_sector_is_never_found_from_are_left_off_the_axis():
+    table = _step_table(60.0).for_sectors(8)
+    assert table.facing_edges_deg[-1] == 80.0  # 80° off its centre, a sector is 60° off or more everywhere
+    assert table.rate[0, 0, -1] > 0.0
 
 
 def test_a_target_that_faces_the_camera_keeps_the_table_as_measured():
@@ -155,4 +166,3 @@ def test_a_target_that_faces_the_camera_keeps_the_table_as_measured():
     assert table.for_sectors(1) is table
     with pytest.raises(ValueError, match="at least one facing sector"):
         table.for_sectors(0)
-
