@@ -122,12 +122,11 @@ def test_a_world_it_has_never_seen_works_without_changes(tmp_path):
 @pytest.mark.long
 def test_a_target_seen_on_the_way_stops_the_move(tmp_path):
     # a dev room (the tuning suite): after looking round from this start, the robot drives across the
-    # room, and a frame toward the motion shows the target's picture on a shelf ahead
-    world = Path(__file__).parents[3] / "shared" / "worlds" / "dev" / "room-1000-0.toml"
+    # room, and a frame toward the motion shows the target's picture on a low cabinet ahead
+    world = Path(__file__).parents[3] / "shared" / "worlds" / "dev" / "room-1000-25.toml"
     config = tmp_path / "fixed.toml"
-    # the run repeats exactly, however loaded the machine; the margin fixes the trajectory that passes the target
-    config.write_text("planned_processing_s = 0.45\n[planner]\nleave_margin = 2.0\n")
-    summary, out = _search(tmp_path, str(world), "--start", "3.43,4.67,195", "--seed", "3",
+    config.write_text("planned_processing_s = 0.45\n")  # the run repeats exactly, however loaded the machine
+    summary, out = _search(tmp_path, str(world), "--start", "8.125,0.625,150", "--seed", "0",
                            extra=("--config", str(config)))
     log = (out / "search.log").read_text()
     assert "interrupted (a detection on the way)" in log or "interrupted (the target found on the way)" in log
