@@ -87,12 +87,10 @@ class DetectabilityTable:
         across = ((np.arange(steps) + 0.5) / steps - 0.5) * width
         angle = np.abs(edges[:-1, None, None] + within_bin[None, :, None] + across[None, None, :])
         angle = np.where(angle > 180.0, 360.0 - angle, angle).reshape(len(edges) - 1, -1)
-        d, o = (np.arange(n) for n in self.rate.shape[:2])
-        idx = np.floor((angle - self.facing_edges_deg[0]) / step).astype(int)
-        inside = (idx >= 0) & (idx < self.rate.shape[2])
-        cells = (d[:, None, None, None], o[None, :, None, None], np.clip(idx, 0, self.rate.shape[2] - 1)[None, None])
-        rate = np.where(inside[None, None], self.rate[cells], 0.0).mean(axis=-1)
-        views = np.where(inside[None, None], self.samples[cells], 0).max(axis=-1)  # behind the cells it averages
+        d, o = ((e[:-1] + e[1:]) / 2 for e in (self.distance_edges_m, self.off_axis_edges_deg))  # bin centres
+        inside, cells = self._cells(d[:, None, None, None], o[None, :, None, None], angle[None, None])
+        rate = np.where(inside, self.rate[cells], 0.0).mean(axis=-1)
+        views = np.where(inside, self.samples[cells], 0).max(axis=-1)  # behind the cells it averages
         # facings that are never found are left off the axis: a kernel bins every facing it scans
         used = max(1, int(np.nonzero(rate.max(axis=(0, 1)) > 0)[0].max(initial=0)) + 1)
         return replace(self, facing_edges_deg=edges[:used + 1], rate=rate[..., :used], samples=views[..., :used])
@@ -108,14 +106,19 @@ class DetectabilityTable:
     def lookup(self, distance_m: np.ndarray, off_axis_deg: np.ndarray, facing_deg: np.ndarray) -> np.ndarray:
         """Detection probability per query (nearest cell; zero outside the measured ranges). Bins by
         the same arithmetic as the planner's :func:`bin_index`, so that both agree on a bin's edge."""
+        inside, cells = self._cells(distance_m, off_axis_deg, facing_deg)
+        return np.where(inside, self.rate[cells], 0.0)
+
+    def _cells(self, distance_m: np.ndarray, off_axis_deg: np.ndarray,
+               facing_deg: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+        """The cell of each query (broadcast), clipped into the table, and whether it lies inside."""
         idx = [np.floor((np.asarray(x, float) - edges[0]) / (edges[1] - edges[0])).astype(int) for edges, x in
                ((self.distance_edges_m, distance_m), (self.off_axis_edges_deg, np.abs(off_axis_deg)),
                 (self.facing_edges_deg, np.abs(facing_deg)))]
         inside = np.ones(np.broadcast(*idx).shape, bool)
         for i, n in zip(idx, self.rate.shape):
             inside &= (i >= 0) & (i < n)
-        clipped = [np.clip(i, 0, n - 1) for i, n in zip(idx, self.rate.shape)]
-        return np.where(inside, self.rate[tuple(clipped)], 0.0)
+        return inside, tuple(np.clip(i, 0, n - 1) for i, n in zip(idx, self.rate.shape))
 
     # --- persistence -------------------------------------------------------------------------------
 
