@@ -5,7 +5,7 @@
     syt-onboard render --world FILE [--start ..] [--pan DEG] [--tilt DEG] --out DIR
     syt-onboard bench [--backend hardware [--port PORT]] --json
     syt-onboard picture NAME --out FILE.png          a built-in picture (the target's) for the planner
-    syt-onboard worlds generate --count N --seed S --out DIR     checked rooms room-S-K.toml
+    syt-onboard worlds generate --count N --seed S --out DIR [--max-turn-deg D]  checked rooms room-S-K.toml
     syt-onboard worlds check WORLD... [--config FILE.toml]  can the simulator run them (format, pictures, ceiling)
     syt-onboard emulate --world NAME_OR_FILE         a Pioneer and a PTU-D46 on pseudo-terminals (JSON line)
     syt-onboard calibrate-stereo --images DIR --board COLSxROWS --square-mm S --out stereo.yaml
@@ -207,6 +207,9 @@ def run_worlds(argv: list[str]) -> int:
     generate.add_argument("--count", type=int, required=True, metavar="N")
     generate.add_argument("--seed", type=int, required=True, metavar="S")
     generate.add_argument("--out", type=Path, required=True, metavar="DIR")
+    generate.add_argument("--max-turn-deg", type=float, metavar="D",
+                          help="turn half the targets by up to D degrees from square to their support's edge, "
+                               "0 to 45 (default: 10, as the shipped suites; 45 reaches between two facing sectors)")
     views = commands.add_parser("views", help="render stereo pairs with true depth of worlds, to score stereo on")
     views.add_argument("--worlds", required=True, metavar="NAMES",
                        help=f"comma-separated suites ({suites}), bundled names, world files or folders of them")
@@ -230,12 +233,15 @@ def run_worlds(argv: list[str]) -> int:
         parser.error(f"--count: must be at least 1, got {args.count}")
     if args.seed < 0:  # numpy's generators take no negative seed
         parser.error(f"--seed: must be 0 or more, got {args.seed}")
+    if args.max_turn_deg is not None and not 0.0 <= args.max_turn_deg <= 45.0:
+        parser.error(f"--max-turn-deg: must be from 0 to 45, got {args.max_turn_deg:g}")
     if args.out.exists() and not args.out.is_dir():
         parser.error(f"--out must be a folder: {args.out} is a file")
-    from onboard.sim.world_generator import write_worlds
+    from onboard.sim.world_generator import MAX_TURN_DEG, write_worlds
 
+    turn = MAX_TURN_DEG if args.max_turn_deg is None else args.max_turn_deg
     try:
-        paths = write_worlds(args.count, args.seed, args.out)
+        paths = write_worlds(args.count, args.seed, args.out, max_turn_deg=turn)
     except ValueError as exc:  # a folder holding other world files
         log.error("%s", exc)
         return 2

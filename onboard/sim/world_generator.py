@@ -8,9 +8,9 @@ floor stand flush against a wall or at least ``GAP_M`` from the walls, and at le
 each other, so the robot (0.62 m across with its clearance) can pass between any two of them. The
 target (one-sided, the built-in "target" picture, 0.23 m cube) stands near the front edge of a
 table, desk, cabinet, crate or shelf top, high (1.6-2.1 m), low (0.4-0.8 m) or in between, its picture
-facing at least ``OPEN_FLOOR_M`` of open floor. The robot starts in the open floor, 3 m or more from
-the target where the room allows (never under 1.5 m). A few posters (distractors, never the
-target's picture nor "chelsea") hang on the walls.
+facing at least ``OPEN_FLOOR_M`` of open floor, half the time turned by up to ``max_turn_deg``, 10° unless
+asked. The robot starts in the open floor, 3 m or more from the target where the room allows (never
+under 1.5 m). A few posters (distractors, never the target's picture nor "chelsea") hang on the walls.
 
 Everything is drawn from the ``numpy`` generator given, so a seed makes the same rooms.
 """
@@ -43,7 +43,8 @@ START_MARGIN_M = 0.45  # the start keeps this from walls and obstacles: open flo
 START_FAR_M = 3.0  # the start this far from the target if the room allows: a search, not a glance
 TARGET_SIZE_M = 0.23
 TARGET_EDGE_M = 0.15  # the target's centre keeps this from the sides of its support
-MAX_TURN_DEG = 10.0  # half the targets are turned by up to this from square to their edge
+MAX_TURN_DEG = 10.0  # half the targets are turned by up to this from square to their edge, unless asked
+TURN_LIMIT_DEG = 45.0  # the most that may be asked: beyond, the picture would face another side's axis
 HIGH_M, LOW_M = 1.5, 0.8  # support tops above HIGH_M are "high", up to LOW_M "low"
 MAX_ATTEMPTS = 40  # draws of one world before giving up
 DISTRACTORS = ("astronaut", "coffee", "hubble", "rocket")  # never "target" nor "chelsea" (the target's cat)
@@ -112,12 +113,13 @@ def _r(value: float) -> float:
 # ----------------------------------------------------------------------------- one world
 
 
-def generate_world(rng: np.random.Generator, name: str) -> dict[str, Any]:
-    """One furnished room as world data (``shared.world.world_toml`` writes it); not yet checked.
-    Raises ``WorldRejected`` when the draw leaves no place for the target or the start."""
+def generate_world(rng: np.random.Generator, name: str, max_turn_deg: float = MAX_TURN_DEG) -> dict[str, Any]:
+    """One furnished room as world data (``shared.world.world_toml`` writes it); not yet checked; the
+    target turned by up to ``max_turn_deg`` half the time. Raises ``WorldRejected`` when the draw leaves
+    no place for the target or the start."""
     room = (_r(rng.uniform(*ROOM_SIDE_M)), _r(rng.uniform(*ROOM_SIDE_M)), _r(rng.uniform(*ROOM_HEIGHT_M)))
     pieces = _furnish(rng, room)
-    target = _place_target(rng, room, pieces)
+    target = _place_target(rng, room, pieces, max_turn_deg)
     start = _place_start(rng, room, pieces, target)
     data = {
         "name": name,
@@ -216,7 +218,8 @@ def _rect_gap(a: Piece, b: Piece) -> float:
 # ----------------------------------------------------------------------------- the target
 
 
-def _place_target(rng: np.random.Generator, room: tuple[float, float, float], pieces: list[Piece]) -> dict[str, Any]:
+def _place_target(rng: np.random.Generator, room: tuple[float, float, float], pieces: list[Piece],
+                  max_turn_deg: float) -> dict[str, Any]:
     """On a support of the height class drawn (high, low, in between; any if that class has none),
     facing the side with the most open floor in front."""
     supports = [p for p in pieces if CATALOGUE[p.label].surface and _top_holds_target(p)
@@ -228,7 +231,8 @@ def _place_target(rng: np.random.Generator, room: tuple[float, float, float], pi
         for index in rng.permutation(len(group)):
             support = group[int(index)]
             options = [(_open_floor_m(room, pieces, support, f, target["position"]), k, target)
-                       for k, f in enumerate(_facings(support)) for target in [_target_on(rng, support, f)]]
+                       for k, f in enumerate(_facings(support))
+                       for target in [_target_on(rng, support, f, max_turn_deg)]]
             options = [option for option in options if option[0] >= OPEN_FLOOR_M]
             if options:
                 return max(options)[2]
@@ -266,14 +270,15 @@ def _open_floor_m(room: tuple[float, float, float], pieces: list[Piece], support
     return cap_m
 
 
-def _target_on(rng: np.random.Generator, support: Piece, facing: tuple[int, int]) -> dict[str, Any]:
-    """At the front edge of the support's top, anywhere along it, slightly turned half the time."""
+def _target_on(rng: np.random.Generator, support: Piece, facing: tuple[int, int],
+               max_turn_deg: float) -> dict[str, Any]:
+    """At the front edge of the support's top, anywhere along it, turned by up to ``max_turn_deg`` half the time."""
     axis, sign = (0, facing[0]) if facing[0] else (1, facing[1])
     other = 1 - axis
     centre = [0.0, 0.0]
     lo, hi = support.lo[other] + TARGET_EDGE_M, support.hi[other] - TARGET_EDGE_M
     centre[other] = rng.uniform(lo, hi) if hi > lo else (support.lo[other] + support.hi[other]) / 2
-    turn = rng.uniform(-MAX_TURN_DEG, MAX_TURN_DEG) if rng.random() < 0.5 else 0.0
+    turn = rng.uniform(-max_turn_deg, max_turn_deg) if rng.random() < 0.5 else 0.0
     # The front face at most 3 cm behind the edge: seen from below, a deeper edge would hide its foot.
     reach = TARGET_SIZE_M / 2 * (math.cos(math.radians(turn)) + math.sin(math.radians(abs(turn))))
     inset = min(reach + rng.uniform(0.0, 0.03), (support.hi[axis] - support.lo[axis]) / 2)
@@ -332,22 +337,24 @@ def world_file_name(seed: int, index: int) -> str:
     return f"room-{seed}-{index}"
 
 
-def draw_checked_world(seed: int, index: int, out_dir: Path) -> tuple[str, int]:
+def draw_checked_world(seed: int, index: int, out_dir: Path, max_turn_deg: float = MAX_TURN_DEG) -> tuple[str, int]:
     """The text of world ``index`` of ``seed`` (the first draw that passes the checks) and how many
-    draws were rejected before it. Raises ``RuntimeError`` after ``MAX_ATTEMPTS`` draws."""
+    draws were rejected before it; its comment names a ``max_turn_deg`` other than ``MAX_TURN_DEG``, which
+    draws another room under the same name. Raises ``RuntimeError`` after ``MAX_ATTEMPTS`` draws."""
     name = world_file_name(seed, index)
     rng = np.random.default_rng([seed, index])
     for attempt in range(MAX_ATTEMPTS):
         started = time.perf_counter()
         try:
-            data = generate_world(rng, name)
+            data = generate_world(rng, name, max_turn_deg)
             world = parse_world(tomllib.loads(world_toml(data)), out_dir)  # what the file will hold
             check_renderable(world)
             seen = check_world(world)
         except (WorldRejected, WorldError) as exc:  # WorldError: a draw the format refuses (overlaps)
             log.info("%s: draw %d rejected: %s", name, attempt + 1, exc)
             continue
-        comment = (f"Generated by `syt-onboard worlds generate --seed {seed}` (world {index} of that seed).\n"
+        turn = "" if max_turn_deg == MAX_TURN_DEG else f" --max-turn-deg {max_turn_deg}"
+        comment = (f"Generated by `syt-onboard worlds generate --seed {seed}{turn}` (world {index} of that seed).\n"
                    f"Checked: the robot can drive from its start to ({seen.x_m:.2f}, {seen.y_m:.2f}), where the "
                    f"camera sees the target's picture\nfrom {seen.distance_m:.2f} m, {seen.off_normal_deg:.0f}° "
                    f"off its normal, at tilt {math.degrees(seen.tilt_rad):.0f}° (confirmed by rendering).")
@@ -359,18 +366,21 @@ def draw_checked_world(seed: int, index: int, out_dir: Path) -> tuple[str, int]:
     raise RuntimeError(f"{name}: no acceptable world in {MAX_ATTEMPTS} draws")
 
 
-def write_worlds(count: int, seed: int, out_dir: Path) -> list[Path]:
-    """Write ``count`` checked worlds ``out_dir/room-SEED-K.toml``; the same seed writes the same files.
-    Raises ``ValueError``, before writing anything, for a negative seed or a folder holding other world files."""
+def write_worlds(count: int, seed: int, out_dir: Path, max_turn_deg: float = MAX_TURN_DEG) -> list[Path]:
+    """Write ``count`` checked worlds ``out_dir/room-SEED-K.toml``; the same seed (and turn) writes the same
+    files. Raises ``ValueError``, before writing anything, for a negative seed, a turn outside 0 to
+    ``TURN_LIMIT_DEG`` or a folder holding other world files."""
     if count < 1:
         raise ValueError(f"count must be at least 1, got {count}")
     if seed < 0:
         raise ValueError(f"seed must be 0 or more, got {seed}")
+    if not 0.0 <= max_turn_deg <= TURN_LIMIT_DEG:
+        raise ValueError(f"max_turn_deg must be from 0 to {TURN_LIMIT_DEG:g}, got {max_turn_deg:g}")
     _check_only_this_batch(count, seed, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths, rejected, started = [], 0, time.perf_counter()
     for index in range(count):
-        text, failures = draw_checked_world(seed, index, out_dir)
+        text, failures = draw_checked_world(seed, index, out_dir, max_turn_deg)
         path = out_dir / f"{world_file_name(seed, index)}.toml"
         path.write_text(text, encoding="utf-8")
         paths.append(path)
@@ -381,7 +391,8 @@ def write_worlds(count: int, seed: int, out_dir: Path) -> list[Path]:
 
 def _check_only_this_batch(count: int, seed: int, out_dir: Path) -> None:
     """Refuse a folder holding world files this batch would not write: run as a folder of worlds
-    (``--worlds DIR``), it would run those stale ones too. The batch's own files may be rewritten."""
+    (``--worlds DIR``), it would run those stale ones too. The batch's own files may be rewritten, whatever
+    turn drew them (a name is seed and index): the batch rewrites each of them."""
     ours = {f"{world_file_name(seed, index)}.toml" for index in range(count)}
     others = sorted(p.name for p in out_dir.glob("*.toml") if p.name not in ours) if out_dir.is_dir() else []
     if others:
