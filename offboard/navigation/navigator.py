@@ -134,6 +134,7 @@ class _Run:
     waiting_start_s: float
     squeeze: bool  # planned on the bare radius (Navigator.floor_map)
     observe: FrameObserver | None = None
+    confident: bool = False  # planned past obstacles seen in one or two frames only (Navigator.floor_map)
     interrupted: str = ""  # why the observer stopped the run
     distance_m: float = 0.0
     steps: int = 0
@@ -175,14 +176,20 @@ class Navigator:
         step = self.config.bug.step_m
         return (float(self._base.drive_time_s(step)) + self._capture_s) / step
 
-    def floor_map(self, squeeze: bool = False) -> FloorMap:
+    def floor_map(self, squeeze: bool = False, confident: bool = False) -> FloorMap:
         """The columns the base may not enter: obstacles inflated by its radius and ``margin_m``, or with
         ``squeeze`` by its bare radius. Rounded up to whole cells, and with a mapped cube occupied by any
         part of an obstacle, the margin can shut on the map a corridor that is wide enough in truth: a
         robot so boxed in squeezes through on the bare radius. Rounded up (6 cubes of 5 cm for the
         Pioneer's 0.26 m) that still keeps 0.275 m from a mapped cube's near face; the margin for odometry
-        error is what it gives up, and the bumper is the last line."""
-        return self.occupancy.floor_map(self.clearance_m(squeeze), self._base.height_m)
+        error is what it gives up, and the bumper is the last line. ``confident``: obstacles seen in
+        several frames only (``confident_log_odds``); a stereo ghost is seen once or twice, a real
+        obstacle at every look toward it."""
+        occupancy = self.occupancy
+        if confident:  # a view of the shared grid, not a copy
+            occupancy = copy.copy(self.occupancy)
+            occupancy.config = replace(self.occupancy.config, occupied_log_odds=self.config.confident_log_odds)
+        return occupancy.floor_map(self.clearance_m(squeeze), self._base.height_m)
 
     def clearance_m(self, squeeze: bool = False) -> float:
         """:meth:`NavigatorConfig.clearance_m` for this robot's base."""
@@ -233,15 +240,17 @@ class Navigator:
 
     # --- driving -----------------------------------------------------------------------------------
 
-    def go_to(self, goal: Point, squeeze: bool = False, observe: FrameObserver | None = None) -> NavigationResult:
+    def go_to(self, goal: Point, squeeze: bool = False, observe: FrameObserver | None = None,
+              confident: bool = False) -> NavigationResult:
         """Drive to ``goal`` (world frame, metres); never raises for an unreachable goal. ``squeeze``:
-        plan the whole run on the bare radius (:meth:`floor_map`). ``observe`` sees every look toward
-        the motion and may stop the run (``interrupted``)."""
+        plan the whole run on the bare radius, and ``confident`` past obstacles seen in one or two
+        frames only (:meth:`floor_map`). ``observe`` sees every look toward the motion and may stop the
+        run (``interrupted``)."""
         state = self.robot.state()  # the robot may have been turned or moved since the last call
         self._odom = state.pose.to_pose()
         self.tracker.predict(self._odom)
         run = _Run(goal, state.robot_time_s, state.robot_time_s, (self.matches_accepted, self.matches_tried),
-                   time.perf_counter(), self.waiting_s, squeeze, observe)
+                   time.perf_counter(), self.waiting_s, squeeze, observe, confident)
         bug = TangentBug(goal, self.config.bug)
         while True:
             verdict = self._verdict(run)
@@ -276,22 +285,16 @@ class Navigator:
         through, and drive as far as the map allows. Whether it found such a route."""
         c = self.config
         here = (self.pose.x_m, self.pose.y_m)
-        path = shortest_path(self._confident_floor_map(run.squeeze), here, run.goal)
+        path = shortest_path(self.floor_map(run.squeeze, confident=True), here, run.goal)
         if path is None or run.probes >= c.max_probes:
             return False
         run.probes += 1
         run.last_time_s = self.sense(self._pan_toward(path[1]), c.probe_tilt_deg)
-        waypoint = _free_prefix(self.floor_map(run.squeeze), here, path, c.bug.step_m)
+        waypoint = _free_prefix(self.floor_map(run.squeeze, run.confident), here, path, c.bug.step_m)
         if waypoint is not None and math.dist(here, waypoint) >= c.bug.min_step_m:
             log.debug("probing toward (%.2f, %.2f)", *waypoint)
             self._drive(run, waypoint)
         return True
-
-    def _confident_floor_map(self, squeeze: bool) -> FloorMap:
-        """The floor map of cubes with strong evidence only (a view of the shared grid, not a copy)."""
-        view = copy.copy(self.occupancy)
-        view.config = replace(self.occupancy.config, occupied_log_odds=self.config.confident_log_odds)
-        return view.floor_map(self.clearance_m(squeeze), self._base.height_m)
 
     def _back_again(self, run: _Run) -> bool:
         """Has the robot come back to where an earlier step (not the last) ended?"""
@@ -352,7 +355,7 @@ class Navigator:
         return True
 
     def _plan(self, run: _Run, bug: TangentBug) -> tuple[Point | None, str]:
-        floor = self.floor_map(run.squeeze)
+        floor = self.floor_map(run.squeeze, run.confident)
         here = (self.pose.x_m, self.pose.y_m)
         nx, ny = floor.blocked.shape
         if not (0.0 <= run.goal[0] < nx * floor.resolution_m and 0.0 <= run.goal[1] < ny * floor.resolution_m):

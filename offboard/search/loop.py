@@ -205,7 +205,8 @@ class Search:
         self._pending_processing_s = 0.0  # planning done towards the coming look
         self._seen: list[RigidTransform] = []  # the camera poses of the looks and glances so far, in odometry
         self._glance_recording_s = 0.0  # wall time logging glances during the current move
-        self._squeeze_to: tuple[float, float] | None = None  # a move chosen on the bare radius (_choose)
+        # a move chosen on the bare radius (_choose): its goal, and whether past obstacles seen once or twice
+        self._squeeze_to: tuple[tuple[float, float], bool] | None = None
         self.on_action: Callable[[Search], None] | None = None  # after every action (the checkpoint)
 
     # --- the loop ------------------------------------------------------------------------------------
@@ -264,22 +265,34 @@ class Search:
     def _choose(self, pose: Pose2D) -> Decision:
         """The policy's next action from ``pose``, on the current maps. A policy that would stop for want
         of a reachable position chooses again on the navigator's bare radius (``squeeze``): the margin
-        can shut on the map a way out that is open in truth, and the robot then squeezes through it."""
+        can shut on the map a way out that is open in truth, and the robot then squeezes through it.
+        Its last resort, once nothing is left where it can go, is to choose past the obstacles seen in
+        one or two frames only (``confident``): a stereo ghost in a narrow way out seals it on the map
+        (a generated room's start pocket, session 60), and looks ahead on the way see a real one again."""
         decision = self._choose_on(pose, squeeze=False)
         if decision.kind == "stop" and decision.status == "exhausted":
-            decision = self._choose_on(pose, squeeze=True)
-            if decision.kind == "move":
-                log.info("boxed in by the navigator's margin: squeezing through on its bare radius")
-                self._squeeze_to = decision.position_m
+            decision = self._squeezed(pose, confident=False)
         if decision.kind == "stop" and decision.status == "exhausted" and self._plans_positions and self.planner.widen():
             self.state.widened = True
             log.info("nothing is left worth a look at the usual tilts, with P = %.3f inside the room: adding tilts %s",
                      self.belief.prob_inside, list(self.config.planner.fallback_tilts_deg))
             return self._choose(pose)
+        if decision.kind == "stop" and decision.status == "exhausted":
+            decision = self._squeezed(pose, confident=True)
         return decision
 
-    def _choose_on(self, pose: Pose2D, squeeze: bool, policy: Policy | None = None) -> Decision:
-        floor = self.navigator.floor_map(squeeze)  # the navigator's clearance: a path here is one it drives
+    def _squeezed(self, pose: Pose2D, confident: bool) -> Decision:
+        """:meth:`_choose_on` the bare radius (``confident``: past obstacles seen once or twice); a move
+        chosen so is driven so."""
+        decision = self._choose_on(pose, squeeze=True, confident=confident)
+        if decision.kind == "move":
+            log.info("boxed in by the navigator's margin: squeezing through on its bare radius%s",
+                     ", past obstacles seen in one or two frames only" if confident else "")
+            self._squeeze_to = (decision.position_m, confident)
+        return decision
+
+    def _choose_on(self, pose: Pose2D, squeeze: bool, policy: Policy | None = None, confident: bool = False) -> Decision:
+        floor = self.navigator.floor_map(squeeze, confident)  # the navigator's: a path here is one it drives
         if self._plans_positions:
             # the full clearance even when squeezing: the aimed viewpoints' geometry is cached per margin
             self.planner.plan_positions(pose, floor, self.navigator.clearance_m())
@@ -305,7 +318,9 @@ class Search:
     def _move(self, decision: Decision) -> None:
         goal = decision.position_m
         before = self.robot_time_s()
-        result = self.navigator.go_to(goal, squeeze=goal == self._squeeze_to, observe=self._glance)
+        squeezed = self._squeeze_to is not None and self._squeeze_to[0] == goal
+        result = self.navigator.go_to(goal, squeeze=squeezed, observe=self._glance,
+                                      confident=squeezed and self._squeeze_to[1])
         self._squeeze_to = None
         motion_s = self.robot_time_s() - before
         processing_s, self._glance_recording_s = result.processing_s - self._glance_recording_s, 0.0

@@ -190,6 +190,42 @@ def test_a_gap_the_margin_shuts_on_the_map_is_open_on_the_bare_radius(agent):
     assert shortest_path(squeezed, west, east) is not None
 
 
+def test_a_ghost_seen_once_that_boxes_the_robot_in_is_driven_past_when_told(agent):
+    """A ring of cubes at the head's height, 0.6 m round the robot, each with one frame's evidence
+    (stereo ghosts of the kind that sealed a generated room's start pocket, session 60): no path out
+    on the bare radius, one on the confident map, and a run planned on it gets out without a contact."""
+    _, robot = agent
+    retry_busy(robot.sim_teleport, 1.5, 2.0, 0.0)
+    navigator = Navigator(robot, OccupancyGrid(VoxelGrid((8.0, 6.0, 2.5), 0.05)))
+    cells = np.indices((160, 120)).reshape(2, -1).T
+    ring = cells[np.abs(np.hypot(*((cells + 0.5) * 0.05 - (1.5, 2.0)).T) - 0.6) < 0.04]
+    with navigator.occupancy.edit() as (log_odds, observed):
+        for z in (22, 23, 24):  # 1.10-1.25 m, under the robot's 1.35 m
+            log_odds[ring[:, 0], ring[:, 1], z] = navigator.occupancy.config.max_hit_per_frame
+            observed[ring[:, 0], ring[:, 1], z] = True
+    goal = (1.5, 3.5)
+    assert shortest_path(navigator.floor_map(squeeze=True), (1.5, 2.0), goal) is None
+    assert shortest_path(navigator.floor_map(squeeze=True, confident=True), (1.5, 2.0), goal) is not None
+    result = navigator.go_to(goal, squeeze=True, confident=True)
+    truth = robot.sim_truth()
+    assert result.status == "reached" and result.stalls == 0, result.reason
+    assert math.dist((truth.x_m, truth.y_m), goal) < 0.2
+
+
+def test_past_ghosts_a_real_obstacle_is_still_seen_and_driven_round(agent, world_path):
+    """Planned past obstacles seen once or twice, the looks ahead on the way see the U at every step,
+    so the robot goes round it as it does on the usual map, touching nothing."""
+    _, robot = agent
+    retry_busy(robot.sim_teleport, 1.5, 2.0, 0.0)
+    navigator = Navigator(robot, OccupancyGrid(VoxelGrid((8.0, 6.0, 2.5), 0.05)))
+    navigator.survey()
+    result = navigator.go_to((5.5, 2.0), confident=True)
+    truth = robot.sim_truth()
+    assert result.status == "reached" and result.stalls == 0  # the simulator reports every contact
+    assert math.dist((truth.x_m, truth.y_m), (5.5, 2.0)) < 0.2
+    assert result.distance_m >= 0.95 * true_shortest(world_path, (1.5, 2.0), (5.5, 2.0))  # round the U, not through
+
+
 def test_a_doorway_too_narrow_for_the_tangent_graph_is_passed_on_the_global_path(agent):
     """A 4 × 3 m room split at x = 1.9-2.1 m by a wall with a 0.75 m doorway (y 1.10-1.85): the
     margin's 7 cubes each side leave one cube of it open, narrower than TangentBug's edge clearance,

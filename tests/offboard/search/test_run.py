@@ -150,6 +150,19 @@ def test_a_robot_its_map_boxes_in_squeezes_through_and_finds_the_target(tmp_path
     assert summary["glances"] >= summary["distance_m"] / 0.6 - 1  # every step's look toward the motion is searched
 
 
+@pytest.mark.long
+def test_a_robot_ghosts_box_in_drives_past_them_and_finds_the_target(tmp_path):
+    # stereo ghosts at the head's height, each seen in one frame, shut the pocket's way out even on the
+    # bare radius: the search stopped here as exhausted after 9 looks, 0 of 63 positions reachable
+    world = Path(__file__).parent / "ghost-pocket-room.toml"
+    config = tmp_path / "fixed.toml"
+    config.write_text("planned_processing_s = 0.45\n")  # the run repeats exactly, however loaded the machine
+    summary, out = _search(tmp_path, str(world), "--start", "0.625,1.125,45", extra=("--config", str(config)))
+    assert "past obstacles seen in one or two frames only" in (out / "search.log").read_text()
+    _assert_found_near_truth(summary, world)
+    assert summary["distance_m"] > 1.0, summary
+
+
 def test_a_configuration_file_keeps_the_values_no_option_overrides(tmp_path):
     from offboard.search.run import SearchRequest, search_config
 
