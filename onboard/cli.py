@@ -209,7 +209,8 @@ def run_worlds(argv: list[str]) -> int:
     generate.add_argument("--out", type=Path, required=True, metavar="DIR")
     generate.add_argument("--max-turn-deg", type=float, metavar="D",
                           help="turn half the targets by up to D degrees from square to their support's edge, "
-                               "0 to 45 (default: 10, as the shipped suites; the planner's facing sectors meet at 22.5)")
+                               "0 to 45 (default: 10, as the shipped suites; the planner's facing sectors meet "
+                               "at 22.5)")
     views = commands.add_parser("views", help="render stereo pairs with true depth of worlds, to score stereo on")
     views.add_argument("--worlds", required=True, metavar="NAMES",
                        help=f"comma-separated suites ({suites}), bundled names, world files or folders of them")

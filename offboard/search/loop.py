@@ -291,7 +291,8 @@ class Search:
             self._squeeze_to = (decision.position_m, confident)
         return decision
 
-    def _choose_on(self, pose: Pose2D, squeeze: bool, policy: Policy | None = None, confident: bool = False) -> Decision:
+    def _choose_on(self, pose: Pose2D, squeeze: bool, policy: Policy | None = None,
+                   confident: bool = False) -> Decision:
         floor = self.navigator.floor_map(squeeze, confident)  # the navigator's: a path here is one it drives
         if self._plans_positions:
             # the full clearance even when squeezing: the aimed viewpoints' geometry is cached per margin
