@@ -234,13 +234,13 @@ def run_worlds(argv: list[str]) -> int:
         parser.error(f"--count: must be at least 1, got {args.count}")
     if args.seed < 0:  # numpy's generators take no negative seed
         parser.error(f"--seed: must be 0 or more, got {args.seed}")
-    if args.max_turn_deg is not None and not 0.0 <= args.max_turn_deg <= 45.0:
-        parser.error(f"--max-turn-deg: must be from 0 to 45, got {args.max_turn_deg:g}")
     if args.out.exists() and not args.out.is_dir():
         parser.error(f"--out must be a folder: {args.out} is a file")
-    from onboard.sim.world_generator import MAX_TURN_DEG, write_worlds
+    from onboard.sim.world_generator import MAX_TURN_DEG, TURN_LIMIT_DEG, write_worlds
 
     turn = MAX_TURN_DEG if args.max_turn_deg is None else args.max_turn_deg
+    if not 0.0 <= turn <= TURN_LIMIT_DEG:  # the generator's own bound, refused by the flag's name
+        parser.error(f"--max-turn-deg: must be from 0 to {TURN_LIMIT_DEG:g}, got {turn:g}")
     try:
         paths = write_worlds(args.count, args.seed, args.out, max_turn_deg=turn)
     except ValueError as exc:  # a folder holding other world files

@@ -197,7 +197,7 @@ def test_a_ghost_seen_once_that_boxes_the_robot_in_is_driven_past_when_told(agen
     _, robot = agent
     retry_busy(robot.sim_teleport, 1.5, 2.0, 0.0)
     navigator = Navigator(robot, OccupancyGrid(VoxelGrid((8.0, 6.0, 2.5), 0.05)))
-    cells = np.indices((160, 120)).reshape(2, -1).T
+    cells = np.indices(navigator.occupancy.grid.shape[:2]).reshape(2, -1).T
     ring = cells[np.abs(np.hypot(*((cells + 0.5) * 0.05 - (1.5, 2.0)).T) - 0.6) < 0.04]
     with navigator.occupancy.edit() as (log_odds, observed):
         for z in (22, 23, 24):  # 1.10-1.25 m, under the robot's 1.35 m
