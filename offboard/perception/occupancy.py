@@ -11,6 +11,11 @@ Per frame, for every stereo point (u, v, d):
   exact count (the cubes the needle's axis crosses, docs/trials/needle-occupancy.patch) changed 91 of
   `dev`'s 128 runs and SPL by −0.003 (standard error 0.012): see docs/search-experiments.md;
 - every cube between the camera and U gains ``s = miss_log_odds`` (eq. 8);
+- a point beyond ``max_range_m`` is too blurred to place (eq. 6's region grows as depth squared), and
+  is dropped. With ``clear_beyond_range`` the ray to it is taken as clear instead: its cubes out to
+  the range gain ``s`` and none is hit (OctoMap's maxrange). That clears space only such rays cross,
+  where one frame's wrong disparity otherwise stays an obstacle (a pocket sealed by ghosts), but it
+  cost SPL on `dev`, so it is off (docs/search-experiments.md, "Boxed in by a margin");
 - each cube is updated once per frame: the evidence of all the points that touched it, capped at
   ``max_hit_per_frame``, else one miss. Occupied wins over free. (Summing, not taking the largest,
   lets the many pixels that see one far cube together say what one near pixel says alone.)
@@ -48,7 +53,8 @@ class OccupancyConfig:
     clamp_max: float = field(default=3.5, metadata=bounds(0.0, 20.0))  # OctoMap's 0.97
     occupied_log_odds: float = field(default=0.5, metadata=bounds(0.0, 20.0))  # at or above: occupied
     free_log_odds: float = field(default=-0.3, metadata=bounds(-20.0, 0.0))  # at or below: free
-    max_range_m: float = field(default=6.0, metadata=bounds(0.5, 50.0))  # stereo beyond this is ignored
+    max_range_m: float = field(default=6.0, metadata=bounds(0.5, 50.0))  # stereo beyond this is not placed
+    clear_beyond_range: bool = False  # a ray to a point beyond max range clears out to it (else: dropped)
     point_stride_px: int = field(default=4, metadata=bounds(1, 32))  # subsample the disparity image
 
     def __post_init__(self) -> None:
@@ -131,7 +137,9 @@ class OccupancyGrid:
         _check_stereo(k, baseline_m, camera_in_world)
         u, v, d = (np.ascontiguousarray(a, np.float64) for a in (u_px, v_px, d_px))
         # an infinite disparity is depth 0 (eq. 6): it would mark the camera's own cube occupied
-        keep = np.isfinite(d) & (d > 0) & (k.fx_px * baseline_m / np.maximum(d, 1e-6) <= c.max_range_m)
+        valid = np.isfinite(d) & (d > 0)
+        range_px = k.fx_px * baseline_m / c.max_range_m  # the disparity at max range
+        keep, beyond = valid & (d >= range_px), valid & (d < range_px) & c.clear_beyond_range
         camera = np.array([k.fx_px, k.fy_px, k.cx_px, k.cy_px, baseline_m])
         # the frame's pose in cube units: p_cube = (R p_cam + t - origin) / resolution
         rotation = camera_in_world.rotation / self.grid.resolution_m
@@ -140,7 +148,8 @@ class OccupancyGrid:
         return int(_integrate_frame(
             self._log_odds.reshape(-1), self._observed.reshape(-1), self._written.reshape(-1), self._epoch[0],
             self._hit_value, self._hit_stamp, self._touch_stamp, self._touched, self._frame, u[keep], v[keep],
-            d[keep], camera, np.ascontiguousarray(rotation), translation, np.array(self.grid.shape, np.int64),
+            d[keep], u[beyond], v[beyond], range_px, camera, np.ascontiguousarray(rotation), translation,
+            np.array(self.grid.shape, np.int64),
             c.hit_scale, c.max_hit_per_frame, c.miss_log_odds, c.clamp_min, c.clamp_max))
 
     def integrate_disparity(self, disparity: np.ndarray, intrinsics: Intrinsics, baseline_m: float,
@@ -342,7 +351,8 @@ def _to_cubes(u, v, d, camera, rotation, translation):
 
 @numba.njit(cache=True)
 def _integrate_frame(log_odds, observed, written, epoch, hit_value, hit_stamp, touch_stamp, touched, frame,
-                     u, v, d, camera, rotation, translation, shape, hit_scale, max_hit, miss, clamp_min, clamp_max):
+                     u, v, d, far_u, far_v, range_d, camera, rotation, translation, shape, hit_scale, max_hit,
+                     miss, clamp_min, clamp_max):
     n_touched = 0
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
@@ -371,6 +381,10 @@ def _integrate_frame(log_odds, observed, written, epoch, hit_value, hit_stamp, t
     for p in range(u.shape[0]):  # eq. 8: free from the camera to where the region begins
         near = _to_cubes(u[p], v[p], d[p] + 0.5, camera, rotation, translation)
         n_touched = _walk_free(translation[0], translation[1], translation[2], near[0], near[1], near[2],
+                               shape, frame, hit_stamp, touch_stamp, touched, n_touched)
+    for p in range(far_u.shape[0]):  # beyond max range: free out to it, nothing hit
+        end = _to_cubes(far_u[p], far_v[p], range_d, camera, rotation, translation)
+        n_touched = _walk_free(translation[0], translation[1], translation[2], end[0], end[1], end[2],
                                shape, frame, hit_stamp, touch_stamp, touched, n_touched)
     for t in range(n_touched):  # each cube once; occupied wins over free
         c = touched[t]

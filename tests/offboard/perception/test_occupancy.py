@@ -73,11 +73,37 @@ def test_a_strided_pixel_lands_where_its_ray_points():
     assert occ.log_odds[tuple(truth)] > 0 and (np.abs(cubes[:, 1:] - truth[1:]) <= 1).all()
 
 
-def test_stereo_beyond_max_range_is_ignored():
+def test_stereo_beyond_max_range_is_dropped():
     occ = OccupancyGrid(ROOM, OccupancyConfig(max_range_m=4.0))
     assert occ.integrate_disparity(_wall_disparity(4.5), K, MOUNT.baseline_m, _facing_east()) == 0
     assert not occ.observed.any()
     assert occ.integrate_disparity(_wall_disparity(3.5), K, MOUNT.baseline_m, _facing_east()) > 0
+
+
+CLEARING = OccupancyConfig(max_range_m=4.0, clear_beyond_range=True)
+
+
+def test_told_to_stereo_beyond_max_range_clears_its_ray_out_to_the_range_and_hits_nothing():
+    """OctoMap's maxrange: the wall 4.5 m off is too far to place, but nothing stands before it."""
+    occ, cam = OccupancyGrid(ROOM, CLEARING), _facing_east()
+    assert occ.integrate_disparity(_wall_disparity(4.5), K, MOUNT.baseline_m, cam) > 0
+    column = occ.state()[:, int(2.0 / 0.05), int(1.2 / 0.05)]
+    assert OCCUPIED not in occ.state()
+    assert (column[int(1.3 / 0.05):int(4.9 / 0.05)] == FREE).all()  # the camera is at x = 1, the range ends at 5
+    assert (column[int(5.1 / 0.05):] == UNKNOWN).all()
+
+
+def test_told_to_a_ghost_that_only_far_rays_cross_is_cleared():
+    """One frame's wrong disparity left an obstacle where only rays to points beyond max range pass:
+    with those dropped, nothing ever cleared it (a start pocket sealed by ghosts)."""
+    occ, cam = OccupancyGrid(ROOM, CLEARING), _facing_east()
+    ghost = tuple(ROOM.index_of(cam.translation + np.array([2.0, 0.0, 0.0])))
+    with occ.edit() as (log_odds, observed):
+        log_odds[ghost], observed[ghost] = 1.0, True
+    assert occ.state()[ghost] == OCCUPIED
+    for _ in range(4):  # four misses of 0.4 outweigh one hit
+        occ.integrate_disparity(_wall_disparity(4.5), K, MOUNT.baseline_m, cam)
+    assert occ.state()[ghost] == FREE
 
 
 def test_an_infinite_disparity_is_dropped_not_put_on_the_camera():
