@@ -328,17 +328,18 @@ class Search:
         self.state.motion_s += motion_s
         self.state.processing_s += processing_s
         self.state.driving_s += motion_s + (0.0 if self.config.planned_processing_s else processing_s)
-        if result.distance_m >= self.config.planner.same_position_m:  # a move that went nowhere changes no view
+        went = result.distance_m >= self.config.planner.same_position_m
+        if went:  # a move that went nowhere changes no view, and is no new position
             self.state.moved()
         self.state.distance_m += result.distance_m
         self.measure_driving()
         self.state.trail.append((result.pose.x_m, result.pose.y_m))
         self._pan_tilt = head_rad(self.robot.state())  # the navigator turned the head toward the motion
-        if result.status == "reached":
+        if went and result.status in ("reached", "interrupted"):
             self.state.positions.append((result.pose.x_m, result.pose.y_m))
+        if result.status == "reached":
             self._look(decision)  # the look the move was chosen for
         elif result.status == "interrupted":  # a glance saw the target: decide again from here
-            self.state.positions.append((result.pose.x_m, result.pose.y_m))
             log.info("move stopped after %.2f m (%.2f m driven in all): %s", result.distance_m, self.state.distance_m,
                      result.reason)
         else:

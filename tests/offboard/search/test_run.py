@@ -134,6 +134,18 @@ def test_a_target_seen_on_the_way_stops_the_move(tmp_path):
     assert summary["glances"] > 0
 
 
+def test_a_target_seen_before_the_first_move_starts_is_found_from_the_one_position(tmp_path):
+    # the report's lab at cost 1 (eq. 9 sends the robot to the best action anywhere, here across the
+    # room): the frame toward the motion, taken before the first step, sees the target; the summary
+    # once counted the move that never went as a second position visited
+    config = tmp_path / "fixed.toml"
+    config.write_text("planned_processing_s = 0.45\n")
+    summary, _ = _search(tmp_path, "paper-lab", "--start", "4.5,0.6,90", "--target", "4.5,2.5,0.75,-90",
+                         extra=("--config", str(config), "--cost", "1", "--target-sides", "4"))
+    assert summary["found"] and summary["glances"] == 1 and summary["actions"] == 0, summary
+    assert summary["distance_m"] == 0.0 and summary["positions_visited"] == 1, summary
+
+
 @pytest.mark.long
 def test_a_robot_its_map_boxes_in_squeezes_through_and_finds_the_target(tmp_path):
     # the start's pocket has two ways out that the navigator's margin shuts on the map; before the
