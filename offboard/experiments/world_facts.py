@@ -421,14 +421,14 @@ def tables_hints(world: WorldFacts, layer_m: float = 0.3, mass: float = 0.99) ->
     """The ``tables`` (knowledge) prior as a hints file: the layer just above each of the world's
     :meth:`~WorldFacts.knowledge_surfaces` holds the same share of ``mass``.
 
+    The knowledge is the report's "the target is on one of the tables": which pieces, not where on
+    them. So each piece is equally likely, whatever its size; sharing by area would send the robot
+    to the largest tops first and leave a small crate for last.
+
     The knowledge is true here (the surfaces include the target's own), so it is nearly all the mass;
     the rest, spread over the room, lets a search go on where the map misplaces a top. Tuned on `dev`
     (cost 3, four starts a room, seed 0): 0.99 against 0.9 gained 0.028 of SPL (standard error 0.018)
-    and 1.7 looks (docs/search-experiments.md, "How sure the knowledge is").
-
-    The knowledge is the report's "the target is on one of the tables": which pieces, not where on
-    them. So each piece is equally likely, whatever its size; sharing by area would send the robot
-    to the largest tops first and leave a small crate for last."""
+    and 1.7 looks (docs/search-experiments.md, "How sure the knowledge is")."""
     tables = world.knowledge_surfaces()
     if not tables:
         raise ValueError(f"{world.name}: no table, desk or surface under its target for the tables prior")
