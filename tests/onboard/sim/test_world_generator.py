@@ -17,7 +17,7 @@ from onboard.cli import main
 from onboard.sim import world_generator
 from onboard.sim.world import load_world
 from onboard.sim.world_check import DRIVE_CLEARANCE_M, WorldRejected, check_world, reachable_floor
-from onboard.sim.world_generator import MAX_TURN_DEG, draw_checked_world, generate_world, write_worlds
+from onboard.sim.world_generator import MAX_TURN_DEG, TURN_LIMIT_DEG, draw_checked_world, generate_world, write_worlds
 from shared.world import FLOOR_OBSTACLE_MAX_Z_M, WORLDS_DIR, Box, World, parse_world
 
 SEED = 7
@@ -260,6 +260,15 @@ def test_a_45_degree_turn_faces_pictures_between_the_axes_and_no_further(monkeyp
     targets = [d["target"] for d in _draws(11, 24, max_turn_deg=45.0)]
     assert max(_off_axis_deg(t["yaw_deg"]) for t in targets) > 30.0
     assert max(abs(t) for t in turns) > 40.0 and all(abs(t) <= 45.05 for t in turns)  # yaw rounded to 0.1°
+
+
+def test_the_help_names_the_generators_own_turn_bounds(capsys):
+    """The command's help is written before the generator is imported (it loads the renderer), so its
+    numbers are literals: this keeps them the generator's."""
+    with pytest.raises(SystemExit):
+        main(["worlds", "generate", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+    assert f"0 to {TURN_LIMIT_DEG:g} (default: {MAX_TURN_DEG:g}," in help_text
 
 
 @pytest.mark.parametrize("turn", ["50", "-1"])
