@@ -119,8 +119,10 @@ class SearchPlanner:
     def _use_tilts(self, tilts_deg: tuple[float, ...]) -> None:
         """The camera settings at these tilts, and fresh action geometries for them."""
         self.settings = CameraSettings.from_fov(self.intrinsics, tilts_deg, self.config.view_overlap)
+        # a baseline decides on every vertex (it never calls plan_positions): a large room's must fit too
+        capacity = max(256, self.config.max_vertices + self.config.viewpoints, len(self.vertices))
         self._geometry = GeometryCache(self.belief, self.settings, self.mount, self.intrinsics, self.table, self.bins,
-                                       max(256, self.config.max_vertices + self.config.viewpoints))
+                                       capacity)
         self._here = ActionGeometry(self.belief, np.zeros((1, 2)), self.settings, self.mount, self.intrinsics,
                                     self.table, self.bins)
 
@@ -187,7 +189,8 @@ class SearchPlanner:
         look_t = self.time_model.look_times_s(pose.heading_rad, pan_rad, tilt_rad, self.settings.azimuth_rad,
                                               self.settings.tilt_rad)
         far_t = self._candidate_times(pose, path_lengths_m)
-        reachable = np.where(np.isfinite(far_t), values.find_prob[:-1], 0)
+        # a candidate within same_position_m is here: its looks are not the robot's to take elsewhere
+        reachable = np.where(np.isfinite(far_t) & self._away(pose)[:, None], values.find_prob[:-1], 0)
         best_anywhere = max(here_detection.max(), reachable.max(initial=0))
         if best_anywhere < self.config.min_detection_prob:
             return Decision("stop", f"no reachable action finds the target with probability ≥ "

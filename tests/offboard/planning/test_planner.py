@@ -302,6 +302,30 @@ def test_cost_1_moves_carry_their_setting_and_never_to_where_the_robot_stands():
     assert d2.kind == "move" and np.hypot(d2.position_m[0] - 1.7, d2.position_m[1] - 1.0) > 0.5, d2.reason
 
 
+@pytest.mark.parametrize("cost", [1, 3])
+def test_with_every_view_here_taken_and_only_here_reachable_the_search_stops_rather_than_look_again(cost):
+    """Cost 1 used to take a look worth 0 (a view taken already) for ever: the candidate 0.3 m away
+    is "here" to a move, yet counted as reachable elsewhere, so "exhausted" and its fallbacks never came."""
+    planner = _planner(cost, boxes=(replace(B_BOX, weight=1.0),))
+    pose = Pose2D(1.7, 1.0, 0.0)
+    paths = _paths(planner, pose)
+    beside = np.all(planner.positions == (2.0, 1.0), axis=1)
+    paths[~beside] = np.inf
+    d = planner.decide(pose, 0.0, 0.0, 0.0, OccupancyGrid(ROOM), paths, taken=frozenset(range(len(planner.settings))))
+    assert d.values.find_prob[:-1][beside].max() > 0.5  # worth a look, had it been elsewhere
+    assert d.kind == "stop" and d.status == "exhausted", d.reason
+
+
+def test_a_baseline_decides_on_every_vertex_of_a_room_with_more_than_256():
+    """Baselines keep the report's whole grid (they never plan positions): 19 x 14 vertices here."""
+    room = VoxelGrid((20.0, 15.0, 2.5), 0.1)
+    belief = TargetBelief(room, facing_sectors=1, coarse_factor=4)
+    planner = SearchPlanner(belief, PlannerConfig(), DetectabilityTable.nominal(), TIME, K, MOUNT)
+    assert len(planner.positions) == 266
+    d = planner.decide(START, 0.0, 0.0, 0.0, OccupancyGrid(room), _paths(planner, START))
+    assert d.kind == "look" and d.find_prob > 0.0
+
+
 def test_viewpoints_are_aimed_at_the_unseen_facing_of_a_mass():
     from offboard.planning.viewpoints import AimedViewpoints
 
