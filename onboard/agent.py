@@ -327,7 +327,11 @@ class Agent:
                                               f"than max_distance_m={limits.max_distance_m:g}")
             if distance_m < _ARRIVED_M:  # already there: its bearing is noise, a turn to it spins for nothing
                 return 0.0, 0.0
-            return pose.bearing_to(*cmd.waypoint_m), distance_m
+            turn_rad = pose.bearing_to(*cmd.waypoint_m)
+            if abs(math.degrees(turn_rad)) > limits.max_turn_deg:
+                raise CommandRefused("limit", f"waypoint_m={list(cmd.waypoint_m)} takes a turn of "
+                                              f"{math.degrees(turn_rad):g}°, more than max_turn_deg={limits.max_turn_deg:g}")
+            return turn_rad, distance_m
         turn_rad, distance_m = math.radians(cmd.turn_deg), cmd.distance_m
         if abs(math.degrees(turn_rad)) > limits.max_turn_deg:
             raise CommandRefused("limit", f"turn_deg={math.degrees(turn_rad):g} exceeds max_turn_deg={limits.max_turn_deg:g}")

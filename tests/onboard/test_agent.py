@@ -96,6 +96,20 @@ def test_out_of_range_commands_are_refused_naming_the_limit(sim_agent, call, cod
     assert (after.pose, after.pan_deg, after.tilt_deg) == (before.pose, before.pan_deg, before.tilt_deg)
 
 
+def test_a_waypoint_that_takes_a_turn_past_max_turn_deg_is_refused_as_that_turn_is(tmp_path):
+    config = tmp_path / "onboard.toml"
+    config.write_text("[base]\nmax_turn_deg = 90\n")
+    with running_agent(tmp_path, "--world", "paper-lab", "--config", str(config)) as (_, robot):
+        before = robot.state().pose
+        heading = math.radians(before.heading_deg)
+        with pytest.raises(CommandError) as err:  # 1 m straight behind: a turn of 180°
+            robot.move_to(before.x_m - math.cos(heading), before.y_m - math.sin(heading))
+        assert err.value.code == "limit" and "°, more than max_turn_deg=90" in str(err.value), str(err.value)
+        with pytest.raises(CommandError, match="turn_deg=180 exceeds max_turn_deg=90"):
+            robot.move(turn_deg=180.0)
+        assert robot.state().pose == before
+
+
 def _raw_get(session: zenoh.Session, key: str, payload: bytes | None):
     replies = list(session.get(key, payload=payload, timeout=5.0))
     assert len(replies) == 1
