@@ -175,6 +175,9 @@ class PtuPanTilt:
             self._link.transact(mode)
         self._res = {axis: parse_decimal(self._link.transact(name), name)
                      for axis, name in (("P", "PR"), ("T", "TR"))}
+        for axis, name in (("P", "PR"), ("T", "TR")):
+            if not self._res[axis] > 0.0:  # every conversion divides by it
+                raise PtuError(name, f"the unit reports a resolution of {self._res[axis]:g} arc-seconds a position")
         self._range = {name: parse_integer(self._link.transact(name), name) for name in ("PN", "PX", "TN", "TX")}
         self.limits = self._intersect(configured)
         self._set_slew(configured.pan_speed_deg_s, configured.tilt_speed_deg_s, configured.accel_deg_s2)
@@ -211,6 +214,8 @@ class PtuPanTilt:
         # the slew the speeds give, and the timeout beyond it: a slow head's long sweep is not a failure
         expected_s = self.limits.slew_time_s(*(math.degrees(positions_to_rad(g - p, self._res[axis]))
                                                 for g, p, axis in zip(goal, self._state[:2], "PT")))
+        if cancel.is_set():  # a stop overtook the look: it never began (LookResult)
+            return 0.0
         with self._io:
             self._check_open("look")
             self._link.limit_hits.clear()

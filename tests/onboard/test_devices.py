@@ -162,6 +162,16 @@ def test_pan_tilt_halts_midway(paced_rig):
     assert 5.0 < math.degrees(head.pan_rad) < 100.0 and not head.moving
 
 
+def test_a_look_cancelled_before_it_begins_never_moves_the_head(rig):
+    """A stop that overtook a queued look has set its flag: the look never began (``LookResult``)."""
+    cancelled = threading.Event()
+    cancelled.set()
+    pantilt = rig.devices.pantilt
+    assert pantilt.look(math.radians(90.0), math.radians(20.0), cancelled) == 0.0
+    head = pantilt.reading()
+    assert (head.pan_rad, head.tilt_rad) == pytest.approx((0.0, 0.0), abs=1e-3) and not head.moving
+
+
 def test_camera_gives_a_rectified_pair_of_the_declared_size(rig):
     pair = rig.devices.camera.capture()
     k = rig.devices.camera.intrinsics

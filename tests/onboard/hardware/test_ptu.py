@@ -98,6 +98,13 @@ def test_a_refused_command_names_it(emulator):
         PtuPanTilt(config(emulator), too_fast)
 
 
+def test_a_resolution_of_zero_from_the_unit_is_a_ptu_error_naming_it(emulator):
+    with emulator._lock:  # every conversion divides by it: a ZeroDivisionError escaped the agent's start-up
+        emulator.machine.model = replace(emulator.machine.model, resolution_arcsec=0.0)
+    with pytest.raises(PtuError, match=r"^PR: the unit reports a resolution of 0 arc-seconds a position"):
+        PtuPanTilt(config(emulator))
+
+
 def test_move_timeout_halts_and_names_the_look(emulator):
     head = PtuPanTilt(config(emulator, move_timeout_s=0.5))
     try:
