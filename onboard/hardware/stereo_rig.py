@@ -119,11 +119,27 @@ def load_rig(path: Path | str) -> StereoRig:
         values |= {key: _distortion(storage, key, path) for key in _DISTORTIONS}
     finally:
         storage.release()
+    for key in ("K1", "K2"):
+        if problem := _camera_matrix_problem(values[key]):
+            raise CalibrationFileError(f"{path}: {key} is not a camera matrix: {problem}")
+    r = values["R"]
+    if not (np.allclose(r @ r.T, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0):
+        raise CalibrationFileError(f"{path}: R is not a rotation (orthonormal, determinant +1)")
     rig = StereoRig(size, values["K1"], values["D1"], values["K2"], values["D2"], values["R"], values["T"])
     if rig.swapped:
         raise CalibrationFileError(f"{path}: T puts the right camera {rig.translation_m[0, 0]:g} m to the left of "
                                    "the left one (left and right swapped when it was made?)")
     return rig
+
+
+def _camera_matrix_problem(k: np.ndarray) -> str:
+    """Why ``k`` is no pinhole camera matrix ((fx, s, cx), (0, fy, cy), (0, 0, 1) with fx, fy > 0), or
+    "": a degenerate one loads, then rectifies to NaN intrinsics that every info reply would carry."""
+    if not (k[0, 0] > 0 and k[1, 1] > 0):
+        return f"focal lengths fx={k[0, 0]:g}, fy={k[1, 1]:g} must be positive"
+    if not np.array_equal(k[1:, 0], [0.0, 0.0]) or k[2, 1] != 0.0 or k[2, 2] != 1.0:
+        return "its last two rows must be (0, fy, cy) and (0, 0, 1)"
+    return ""
 
 
 def _node(storage: cv2.FileStorage, key: str, path: Path) -> cv2.FileNode:

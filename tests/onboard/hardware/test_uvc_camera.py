@@ -117,6 +117,14 @@ def test_clear_errors(tmp_path, setup):
     broken.write_text("%YAML:1.0\n---\nimage_width: 320\nimage_height: 240\n")
     with pytest.raises(CalibrationFileError, match="broken.yaml: missing key 'K1'"):
         load_rig(broken)
+    rig = load_rig(config.calibration)
+    for name, bad, says in (("k1", np.zeros((3, 3)), "K1 is not a camera matrix: focal lengths fx=0, fy=0"),
+                            ("k2", rig.k2 * 2.0, r"K2 is not a camera matrix: its last two rows must be"),
+                            ("rotation", rig.rotation * 1.1, r"R is not a rotation")):
+        degenerate = tmp_path / f"degenerate-{name}.yaml"  # loaded, it rectified to NaN intrinsics
+        replace(rig, **{name: bad}).save(degenerate)
+        with pytest.raises(CalibrationFileError, match=f"degenerate-{name}.yaml: {says}"):
+            load_rig(degenerate)
     with pytest.raises(DeviceFault, match="cannot be opened"):
         UvcStereoCamera(replace(config, device=str(tmp_path / "nothing_%02d.png")))
     with pytest.raises(DeviceFault, match="does not hold two 320x240 images"):
