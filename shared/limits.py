@@ -20,11 +20,13 @@ class BaseLimits:
 
     radius_m: float = field(default=0.26, metadata=bounds(0.05, 2.0))  # footprint disc for collisions
     height_m: float = field(default=1.35, metadata=bounds(0.1, 3.0))  # anything lower blocks the base
-    max_speed_m_s: float = field(default=1.2, metadata=bounds(0.01, 3.0))  # P3-DX top speed
-    default_speed_m_s: float = field(default=0.4, metadata=bounds(0.01, 3.0))  # indoor cruising speed
+    # bounded by the P3-DX firmware's 2200 mm/s and 500°/s: it clamps SETV/SETRV beyond them, silently,
+    # and the time model would then count on a speed the base never reaches
+    max_speed_m_s: float = field(default=1.2, metadata=bounds(0.01, 2.2))  # P3-DX top speed
+    default_speed_m_s: float = field(default=0.4, metadata=bounds(0.01, 2.2))  # indoor cruising speed
     accel_m_s2: float = field(default=0.3, metadata=bounds(0.01, 5.0))  # ARIA's TransAccel default
-    max_turn_rate_deg_s: float = field(default=300.0, metadata=bounds(1.0, 1000.0))
-    default_turn_rate_deg_s: float = field(default=60.0, metadata=bounds(1.0, 1000.0))
+    max_turn_rate_deg_s: float = field(default=300.0, metadata=bounds(1.0, 500.0))
+    default_turn_rate_deg_s: float = field(default=60.0, metadata=bounds(1.0, 500.0))
     turn_accel_deg_s2: float = field(default=100.0, metadata=bounds(1.0, 5000.0))
     max_distance_m: float = field(default=20.0, metadata=bounds(0.1, 1000.0))  # one move command
     max_turn_deg: float = field(default=360.0, metadata=bounds(1.0, 3600.0))  # one move command

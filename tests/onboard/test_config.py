@@ -24,6 +24,8 @@ def test_file_and_overrides(tmp_path):
     ("watchdog_ms = 500\n", "watchdog_ms"),  # under three of the planner's 200 ms heartbeats
     ("[base]\nmax_sped_m_s = 1.0\n", "base.max_sped_m_s"),  # a typo is not silently ignored
     ("[base]\ndefault_speed_m_s = 2.0\nmax_speed_m_s = 1.0\n", "base"),
+    ("[base]\nmax_speed_m_s = 2.5\n", "base.max_speed_m_s"),  # past the P3-DX firmware's 2200 mm/s
+    ("[base]\nmax_turn_rate_deg_s = 600\n", "base.max_turn_rate_deg_s"),  # and its 500°/s
     ("backend = 'serial'\n", "backend"),
     ("[hardware.base]\nport = ''\n", "hardware.base.port"),
     ("[hardware.base]\nbaud = 12\n", "hardware.base.baud"),
