@@ -121,11 +121,22 @@ def _finite(value: int | float) -> bool:
 
 
 def placement_from_dict(d: dict) -> WorldPlacement:
-    try:
-        return WorldPlacement(str(d["world"]), tuple(float(v) for v in d["start"]),
-                              tuple(float(v) for v in d["target"]))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise TruthLinkError(f"truth link: a world reply lacks or garbles {exc}") from None
+    """The placement in a world reply, as strict as :func:`truth_from_dict`: a start of two numbers
+    passed here once and failed later, in ``World.with_start``, as a bare TypeError."""
+    missing = [k for k in ("world", "start", "target") if k not in d]
+    if missing:
+        raise TruthLinkError(f"truth link: a world reply lacks {', '.join(missing)}")
+    if not isinstance(d["world"], str):
+        raise TruthLinkError(f"truth link: a world reply's world must be a path, got {d['world']!r}")
+    return WorldPlacement(d["world"], _numbers(d, "start", 3), _numbers(d, "target", 4))
+
+
+def _numbers(d: dict, key: str, count: int) -> tuple[float, ...]:
+    value = d[key]
+    if (not isinstance(value, list) or len(value) != count
+            or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not _finite(v) for v in value)):
+        raise TruthLinkError(f"truth link: a world reply's {key} must be {count} finite numbers, got {value!r}")
+    return tuple(float(v) for v in value)
 
 
 # --- the server (in the emulate process) -------------------------------------------------------------

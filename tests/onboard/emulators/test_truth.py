@@ -9,7 +9,7 @@ import threading
 import pytest
 
 from onboard.emulators.truth import (Truth, TruthLink, TruthLinkError, TruthServer, WorldPlacement, decode,
-                                     truth_from_dict)
+                                     placement_from_dict, truth_from_dict)
 from onboard.sim.world import load_world
 from shared.geometry import Pose2D
 
@@ -69,3 +69,17 @@ def test_decoding_refuses_what_is_not_a_truth():
             truth_from_dict({**good, key: value})
     with pytest.raises(TruthLinkError, match="lacks pan_rad"):
         truth_from_dict({k: v for k, v in good.items() if k != "pan_rad"})
+
+
+def test_decoding_refuses_what_is_not_a_placement():
+    good = {"world": "/worlds/lab.toml", "start": [1.0, 2.0, 0.0], "target": [3, 2, 0.75, -90]}
+    assert placement_from_dict(good) == WorldPlacement("/worlds/lab.toml", (1.0, 2.0, 0.0), (3.0, 2.0, 0.75, -90.0))
+    for key, value, says in (("start", [1.0, 2.0], "start must be 3 finite numbers"),  # a TypeError later, unnamed
+                             ("target", [1, 2, 3, "4"], "target must be 4 finite numbers"),
+                             ("start", [1.0, float("nan"), 0.0], "start must be 3"),
+                             ("start", [True, 2.0, 0.0], "start must be 3"),
+                             ("world", 7, "world must be a path")):
+        with pytest.raises(TruthLinkError, match=f"world reply's {says}"):
+            placement_from_dict({**good, key: value})
+    with pytest.raises(TruthLinkError, match="world reply lacks target"):
+        placement_from_dict({k: v for k, v in good.items() if k != "target"})
