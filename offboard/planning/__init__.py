@@ -1,4 +1,4 @@
-"""The SYT planner, pure: target belief (eq. 1, 2, 4), the detection function of a look, sensed
+"""The SYT planner, pure: target belief (eq. 1, 4 and §3.2's P[F]), the detection function of a look, sensed
 spheres, expected detection of every action, the time model, where to look and where to move
 (eq. 3, 9-12) and the priors of §3.4.
 

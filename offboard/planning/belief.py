@@ -4,7 +4,8 @@ Paper symbols, named once:
 
 - ``p(c_i, τ)`` → :attr:`TargetBelief.target_prob`; ``p(c_out, τ)`` → :attr:`TargetBelief.prob_outside`;
 - ``b(c_i, f)`` → ``detection_prob`` (computed per look in :mod:`offboard.planning.detection_function`);
-- ``P[F]`` (eq. 2) → :attr:`TargetBelief.success_prob`.
+- ``P[F]`` (§3.2, the success probability of the looks so far; the report's eq. 2 is their time,
+  T[F]) → :attr:`TargetBelief.success_prob`.
 
 Beyond the report (its §6.2, "future work"): the target's facing is unknown, so each cube's mass is
 split over ``facing_sectors`` directions its pictured face could point to. A look that misses
@@ -50,7 +51,7 @@ class TargetBelief:
         self._facing_blocked = np.zeros((*grid.shape, facing_sectors), np.bool_)
         self._solid_done = np.zeros(grid.shape, np.bool_)  # a cache: the solid cubes already folded in
         self._coarse = np.zeros((*self.coarse_shape, facing_sectors), np.float64)
-        self.success_prob = 0.0  # P[F], eq. 2
+        self.success_prob = 0.0  # P[F], §3.2
         self.set_prior(np.ones(grid.shape), prob_outside)
 
     @property
@@ -159,12 +160,12 @@ class TargetBelief:
 
         ``cube_index``: flat indices of the cubes the look could see; ``detection_prob``: b(c, f) for
         each of them and each facing sector, shape (n, facing_sectors). Returns the look's detection
-        probability P_Ψ(f) (eq. 1) and folds it into P[F] (eq. 2).
+        probability P_Ψ(f) (eq. 1) and folds it into P[F] (§3.2).
         """
         cube_index = self._cube_index(cube_index)
         b = self._detection_prob(detection_prob, len(cube_index), np.float32)
         found_prob = self._observe(cube_index, 1.0 - b)  # eq. 1: Σ p(c) b(c, f), before the update
-        self.success_prob += (1.0 - self.success_prob) * found_prob  # eq. 2, one more term
+        self.success_prob += (1.0 - self.success_prob) * found_prob  # P[F] of §3.2, one more term
         return found_prob
 
     def expected_detection(self, cube_index: np.ndarray, detection_prob: np.ndarray) -> float:
