@@ -27,8 +27,8 @@ from offboard.perception.voxel_grid import VoxelGrid
 from shared.geometry import Intrinsics, RigidTransform
 
 
-def detection_likelihood(grid: VoxelGrid, cube_index: np.ndarray, detection_prob: np.ndarray,
-                         located: np.ndarray, false_positive_rate: float) -> np.ndarray:
+def detection_likelihood(cube_index: np.ndarray, detection_prob: np.ndarray, located: np.ndarray,
+                         false_positive_rate: float) -> np.ndarray:
     """Likelihood ratios (n, facing_sectors) of a detection for the footprint's cubes.
 
     ``located`` (n,): g(x | c) for each footprint cube, summing to 1 over them (where the detection

@@ -471,7 +471,7 @@ class Search:
             located = located_along_rays(grid, footprint.cube_index, obs.detection.box_px, obs.camera_in_world,
                                          obs.intrinsics)
         self.belief.observe(footprint.cube_index, detection_likelihood(
-            grid, footprint.cube_index, footprint.detection_prob, located, alpha))
+            footprint.cube_index, footprint.detection_prob, located, alpha))
         estimate = obs.target_m
         if estimate is None:
             # the likeliest cube on its rays (where rays from two views cross), not anywhere in the room,

@@ -33,7 +33,7 @@ def _look(belief: TargetBelief):
 def _detect(belief: TargetBelief, at: np.ndarray, alpha: float, sigma_m: float = 0.1) -> None:
     fp = _look(belief)
     located = located_at_point(ROOM, fp.cube_index, at, sigma_m)
-    belief.observe(fp.cube_index, detection_likelihood(ROOM, fp.cube_index, fp.detection_prob, located, alpha))
+    belief.observe(fp.cube_index, detection_likelihood(fp.cube_index, fp.detection_prob, located, alpha))
 
 
 def test_a_confident_detection_concentrates_the_belief_around_it():
@@ -70,7 +70,7 @@ def test_a_detection_far_from_any_seen_cube_explains_nothing():
     fp = _look(belief)
     located = located_at_point(ROOM, fp.cube_index, np.array([0.2, 0.2, 0.2]), 0.1)  # behind the camera
     assert located.sum() == 0
-    ratio = detection_likelihood(ROOM, fp.cube_index, fp.detection_prob, located, 0.01)
+    ratio = detection_likelihood(fp.cube_index, fp.detection_prob, located, 0.01)
     np.testing.assert_allclose(ratio, 1.0 - fp.detection_prob)  # as if it had missed
 
 
@@ -80,7 +80,7 @@ def test_without_depth_the_mass_gathers_along_the_detected_rays():
     box = (300.0, 220.0, 340.0, 260.0)  # the image centre: the ray straight ahead
     located = located_along_rays(ROOM, fp.cube_index, box, CAMERA, K)
     assert located.sum() == pytest.approx(1.0)
-    belief.observe(fp.cube_index, detection_likelihood(ROOM, fp.cube_index, fp.detection_prob, located, 0.005))
+    belief.observe(fp.cube_index, detection_likelihood(fp.cube_index, fp.detection_prob, located, 0.005))
     on_ray = sum(belief.mass_near(np.array([x, 1.5, 1.2]), 0.15) for x in np.arange(1.0, 3.5, 0.25))
     assert on_ray > 0.6  # along the ray, at every depth
     assert belief.mass_near(TARGET, 0.3) < 0.5  # but nowhere in particular
@@ -115,7 +115,7 @@ def test_far_away_one_confident_detection_is_found_only_as_a_located_one_and_a_w
 
 def test_no_detector_is_infallible():
     with pytest.raises(ValueError, match="positive"):
-        detection_likelihood(ROOM, np.arange(3), np.zeros((3, 1)), np.ones(3) / 3, 0.0)
+        detection_likelihood(np.arange(3), np.zeros((3, 1)), np.ones(3) / 3, 0.0)
 
 
 def test_a_located_detection_is_the_gaussian_of_its_distance_cut_at_three_sigma():
