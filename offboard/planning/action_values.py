@@ -109,7 +109,7 @@ class ActionGeometry:
         near, far = table.range_m
         self._view = np.array([bins.el_min_rad, bins.el_max_rad, near, far,
                                math.tan(intrinsics.hfov_rad / 2), math.tan(intrinsics.vfov_rad / 2)])
-        self.bin_counts = (bins.el_count, bins.az_count)  # the sensed spheres evaluated with it must share them
+        self.bins = bins  # the sensed spheres evaluated with it must share them
         self._rotations = np.ascontiguousarray(settings.rotations(mount))
         facings = belief.facing_azimuths_rad
         self._facing_xy = np.column_stack([np.cos(facings), np.sin(facings)])  # NaN: faces the camera
@@ -130,8 +130,8 @@ class ActionGeometry:
             return
         self.positions_m[rows] = positions_m
         t = self.table
-        _geometry(self._blocks_m, self.cameras_m(rows), rows, self._view, *self.bin_counts, self._rotations, t.distance_edges_m,
-                  *self._cos_edges, self._facing_xy, self.distance_m, self.sphere_bin, self.distance_bin,
+        _geometry(self._blocks_m, self.cameras_m(rows), rows, self._view, self.bins.el_count, self.bins.az_count,
+                  self._rotations, t.distance_edges_m, *self._cos_edges, self._facing_xy, self.distance_m, self.sphere_bin, self.distance_bin,
                   self.facing_bin, self.off_axis_bin)
 
 
@@ -230,9 +230,11 @@ def _check_inputs(geometry: ActionGeometry, rows: np.ndarray, mass: np.ndarray, 
         raise ValueError(f"rows must be a list of the geometry's {capacity} rows, not {rows}")
     if mass.shape != (blocks, sectors):
         raise ValueError(f"the belief's blocks and facings {mass.shape} are not the geometry's {(blocks, sectors)}")
-    if spheres.radius_m.shape != (len(rows), *geometry.bin_counts):
+    if spheres.bins != geometry.bins:  # the same counts over other elevations would be read as these
+        raise ValueError(f"the spheres' bins {spheres.bins} are not the geometry's {geometry.bins}")
+    if spheres.radius_m.shape != (len(rows), geometry.bins.el_count, geometry.bins.az_count):
         raise ValueError(f"spheres.radius_m has shape {spheres.radius_m.shape}, not one sphere per row "
-                         f"{(len(rows), *geometry.bin_counts)}")
+                         f"{(len(rows), geometry.bins.el_count, geometry.bins.az_count)}")
     if heavy is not None and np.shape(spheres.toward_m) != (len(rows), len(heavy)):
         raise ValueError(f"spheres.toward_m has shape {np.shape(spheres.toward_m)}, not one radius per row "
                          f"and heavy block {(len(rows), len(heavy))}")

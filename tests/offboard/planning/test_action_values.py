@@ -53,9 +53,9 @@ def test_inputs_that_do_not_match_the_rows_are_refused():
         evaluate(geometry, two[:1], belief, spheres)  # two spheres for one row
     with pytest.raises(ValueError, match="spheres.radius_m"):
         evaluate(geometry, two, belief, sensed_spheres(occupancy, geometry.cameras_m(two[:1]), BINS, far))
-    with pytest.raises(ValueError, match="spheres.radius_m"):
-        coarse = SphereBins(az_count=24)
-        evaluate(geometry, two, belief, sensed_spheres(occupancy, geometry.cameras_m(two), coarse, far))
+    for other in (SphereBins(az_count=24), SphereBins(el_min_rad=math.radians(-60.0))):  # the latter: the same counts
+        with pytest.raises(ValueError, match="the spheres' bins .* are not the geometry's"):
+            evaluate(geometry, two, belief, sensed_spheres(occupancy, geometry.cameras_m(two), other, far))
     with pytest.raises(ValueError, match="toward_m"):
         evaluate(geometry, two, belief, spheres, heavy=heavy[:1])
     with pytest.raises(ValueError, match="rows"):
