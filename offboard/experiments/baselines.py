@@ -149,28 +149,27 @@ class _Tour:
         """The next position to look around from. A position is visited on arrival (:meth:`_look_around`),
         so a move that a detection on the way stopped short goes on to its goal, if it is still reachable."""
         if self.goal is not None and not self.visited[self.goal] and np.isfinite(paths[self.goal]):
-            return self._move_to(pose, self.goal, paths[self.goal], "on to")
+            return self._move_to(pose, self.goal, paths, "on to")
         available = np.isfinite(paths) & ~self.visited
         if not available.any():
             return Decision("stop", f"{self.name}: every reachable position has been looked around",
                             status="exhausted")
         self.goal, why = self._choose(pose, occupancy, paths, available)
-        return self._move_to(pose, self.goal, paths[self.goal], why)
+        return self._move_to(pose, self.goal, paths, why)
 
     def _choose(self, pose: Pose2D, occupancy: OccupancyGrid, paths: np.ndarray,
                 available: np.ndarray) -> tuple[int, str]:
         return _nearest(paths, available), "the nearest unvisited position"
 
-    def _move_to(self, pose: Pose2D, j: int, path_m: float, why: str) -> Decision:
+    def _move_to(self, pose: Pose2D, j: int, paths: np.ndarray, why: str) -> Decision:
+        """To candidate ``j``, its first look the quickest one on arrival, timed as SYT times a move."""
         x, y = (float(v) for v in self.planner.positions[j])
-        settings, model = self.planner.settings, self.planner.time_model
-        arrival = math.atan2(y - pose.y_m, x - pose.x_m)  # heading on arrival: the direction of travel
-        looks = model.look_times_s(arrival, 0.0, 0.0, settings.azimuth_rad, settings.tilt_rad)
-        s = int(np.argmin(looks))
-        travel = model.travel_s(path_m, pose.bearing_to(x, y) if pose.distance_to(x, y) > 1e-6 else 0.0)
-        return Decision("move", f"{self.name}: {why} ({x:g}, {y:g}), {path_m:.1f} m away",
+        times = self.planner.candidate_times(pose, paths)[j]
+        s = int(np.argmin(times))
+        settings = self.planner.settings
+        return Decision("move", f"{self.name}: {why} ({x:g}, {y:g}), {paths[j]:.1f} m away",
                         float(settings.azimuth_rad[s]), float(settings.tilt_rad[s]), (x, y),
-                        time_s=float(travel + looks[s]), setting=s)
+                        time_s=float(times[s]), setting=s)
 
 
 def _nearest(paths: np.ndarray, available: np.ndarray) -> int:

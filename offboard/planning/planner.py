@@ -188,7 +188,7 @@ class SearchPlanner:
         values.covering_prob[-1] = here_covering
         look_t = self.time_model.look_times_s(pose.heading_rad, pan_rad, tilt_rad, self.settings.azimuth_rad,
                                               self.settings.tilt_rad)
-        far_t = self._candidate_times(pose, path_lengths_m)
+        far_t = self.candidate_times(pose, path_lengths_m)
         # a candidate within same_position_m is here: its looks are not the robot's to take elsewhere
         reachable = np.where(np.isfinite(far_t) & self._away(pose)[:, None], values.find_prob[:-1], 0)
         best_anywhere = max(here_detection.max(), reachable.max(initial=0))
@@ -290,7 +290,7 @@ class SearchPlanner:
         return ActionValues(np.vstack([r.find_prob for r in rows]),
                             np.concatenate([r.covering_prob for r in rows]))
 
-    def _candidate_times(self, pose: Pose2D, path_lengths_m: np.ndarray) -> np.ndarray:
+    def candidate_times(self, pose: Pose2D, path_lengths_m: np.ndarray) -> np.ndarray:
         """t(f) of every (candidate, setting): travel along the path, then a look (heading on
         arrival taken as the direction of travel); inf where the candidate is unreachable."""
         dx, dy = self.positions[:, 0] - pose.x_m, self.positions[:, 1] - pose.y_m
