@@ -32,6 +32,7 @@ from offboard.planning.belief import TargetBelief
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.voxel_grid import VoxelGrid
 from offboard.perception.observation import Observation
+from offboard.perception.stereo import depth_from_disparity
 from shared.geometry import HeadMount, Intrinsics, Pose2D, RigidTransform
 
 MAX_OCCUPIED_POINTS = 60_000
@@ -59,9 +60,8 @@ def blueprint() -> rrb.Blueprint:
 class Recorder:
     """A Rerun recording stream for one search (pass it around; no global state)."""
 
-    def __init__(self, path: Path | None = None, spawn: bool = False, connect_url: str | None = None,
-                 recording_id: str | None = None):
-        self.stream = rr.RecordingStream("syt", recording_id=recording_id)
+    def __init__(self, path: Path | None = None, spawn: bool = False, connect_url: str | None = None):
+        self.stream = rr.RecordingStream("syt")
         sinks: list = []
         if path is not None:
             sinks.append(rr.FileSink(str(path)))
@@ -124,9 +124,7 @@ class Recorder:
     def log_observation(self, obs: Observation, depth_of_field_m: float) -> None:
         s = self.stream
         s.log("world/robot/head/camera/image", rr.Image(obs.capture.left))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            depth = np.where(np.isfinite(obs.disparity) & (obs.disparity > 0),
-                             obs.intrinsics.fx_px * obs.baseline_m / obs.disparity, 0.0).astype(np.float32)
+        depth = np.nan_to_num(depth_from_disparity(obs.disparity, obs.intrinsics, obs.baseline_m), nan=0.0)  # 0: none
         s.log("world/robot/head/camera/depth", rr.DepthImage(depth, meter=1.0))
         if obs.detection is not None:
             s.log("world/robot/head/camera/image/detection",
