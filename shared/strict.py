@@ -154,17 +154,26 @@ def _convert_tuple(tp: Any, value: Any, where: str, error: type[StructureError],
                  for i, (k, v) in enumerate(zip(kinds, value)))
 
 
+def finite_float(value: Any) -> float:
+    """``value`` as a float if it is a finite number, not a bool or a string that ``float`` would
+    take; else ValueError saying which of those it failed."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError("must be a number")
+    try:
+        number = float(value)
+    except OverflowError:  # a TOML integer has no size limit
+        raise ValueError("too large for a number") from None
+    if not math.isfinite(number):
+        raise ValueError("must be finite")
+    return number
+
+
 def _convert_scalar(tp: Any, value: Any, where: str, error: type[StructureError]) -> Any:
     if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise error(where, value, "expected a number")
         try:
-            number = float(value)
-        except OverflowError:  # a TOML integer has no size limit
-            raise error(where, value, "too large for a number") from None
-        if not math.isfinite(number):
-            raise error(where, value, "must be finite")
-        return number
+            return finite_float(value)
+        except ValueError as exc:
+            raise error(where, value, str(exc)) from None
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise error(where, value, "expected an integer")

@@ -60,6 +60,7 @@ import numpy as np
 
 from shared import toml_writer
 from shared.geometry import Pose2D
+from shared.strict import finite_float
 
 WORLDS_DIR = Path(__file__).parent / "worlds"
 FLOOR_OBSTACLE_MAX_Z_M = 1.5
@@ -375,15 +376,10 @@ def _string(value: Any, key: str) -> str:
 
 
 def _number(value: Any, key: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise WorldError(f"{key}: must be a number, got {value!r}")
     try:
-        number = float(value)
-    except OverflowError:  # a TOML integer has no size limit
-        raise WorldError(f"{key}: too large for a number, got {value!r}") from None
-    if not math.isfinite(number):
-        raise WorldError(f"{key}: must be finite, got {value!r}")
-    return number
+        return finite_float(value)
+    except ValueError as exc:
+        raise WorldError(f"{key}: {exc}, got {value!r}") from None
 
 
 def _sides(value: Any) -> int:

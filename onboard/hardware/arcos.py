@@ -18,6 +18,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from enum import IntEnum
 
+from shared.geometry import wrap_angle
+
 log = logging.getLogger(__name__)
 
 HEADER = b"\xfa\xfb"
@@ -286,8 +288,7 @@ class Sip:
 
 
 def thpos_to_rad(thpos: int) -> float:
-    angle = thpos * 2.0 * math.pi / THPOS_PER_TURN
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+    return wrap_angle(thpos * 2.0 * math.pi / THPOS_PER_TURN)
 
 
 def rad_to_thpos(angle_rad: float) -> int:
