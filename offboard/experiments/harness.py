@@ -52,7 +52,7 @@ from offboard.experiments.report import append_row, finished_keys, write_report
 from offboard.experiments.world_facts import (Placement, Start, WorldFacts, load_facts, robot_starts, simulator_refuses,
                                               tables_hints, target_placements, viewpoint)
 from offboard.search.loop import Search, SearchConfig
-from shared.arguments import floats, probability
+from shared.arguments import floats, number, probability
 from shared.config import load_config
 from shared.world import expand_suites, resolve_world, suite_names
 
@@ -122,7 +122,11 @@ def build_runs(spec: GridSpec) -> list[Run]:
                                                                      spec.methods):
             costs = spec.costs if method == "syt" else (None,)  # the cost function is SYT's alone
             runs += [Run(method, name, start, target, c, prior, seed) for c in costs]
-    return runs
+    # one run a key (two names of one world file, two equal placements): a run twice would be done twice
+    unique: dict[str, Run] = {}
+    for run in runs:
+        unique.setdefault(run.key, run)
+    return list(unique.values())
 
 
 # --- results.csv rows ------------------------------------------------------------------------------
@@ -465,7 +469,13 @@ def _checked_settings(settings: SweepSettings) -> dict:
     path, now, current = settings.out / SETTINGS_FILE, run_settings(settings), code_version()
     codes = []
     if path.is_file():
-        recorded = json.loads(path.read_text())
+        try:
+            recorded = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:  # cut short by a kill, say
+            raise SweepRefused(f"{path} is not the settings file this harness writes ({exc}): use another --out") from None
+        if not isinstance(recorded, dict):
+            raise SweepRefused(f"{path} is not the settings file this harness writes (not a JSON object): "
+                               "use another --out")
         codes = recorded.pop(CODE_KEY, [])
         before, after = _flat(recorded), _flat(now)
         differ = [f"{k} {before.get(k)!r} there, {after.get(k)!r} now" for k in sorted(before.keys() | after.keys())
@@ -504,7 +514,9 @@ def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progr
     progress = Progress(total=len(runs), skipped=len(runs) - len(todo))
     prepared = _prepare(todo, settings.out)
     if todo:  # only now, and only with runs to do: the folder is bound to settings and code its runs have
-        (settings.out / SETTINGS_FILE).write_text(json.dumps(recorded, indent=2) + "\n")
+        written = settings.out / (SETTINGS_FILE + ".new")
+        written.write_text(json.dumps(recorded, indent=2) + "\n")
+        written.replace(settings.out / SETTINGS_FILE)  # at once: a kill leaves the old file or the new one
     workers = _Workers(settings.jobs, settings.out / "workers")
     if on_progress:
         on_progress(progress)
@@ -545,7 +557,7 @@ def _list(kind: type, allowed: tuple | None = None):
         bad = [v for v in values if allowed is not None and v not in allowed]
         if bad or not values:
             raise argparse.ArgumentTypeError(f"{text!r}: choose from {', '.join(map(str, allowed or ()))}")
-        return values
+        return tuple(dict.fromkeys(values))  # a value given twice would run its runs twice
     return parse
 
 
@@ -562,14 +574,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=_list(int), metavar="S,..", help="simulator seeds (and the random baseline's)")
     parser.add_argument("--methods", type=_list(str, ("syt", *BASELINE_METHODS)), metavar="M,..",
                         help=f"syt, {', '.join(BASELINE_METHODS)}")
-    parser.add_argument("--starts", type=int, metavar="N", help="robot starts per world (derived from the world)")
-    parser.add_argument("--targets", type=int, metavar="N",
+    parser.add_argument("--starts", type=number("--starts", 1, 10_000, int), metavar="N",
+                        help="robot starts per world (derived from the world)")
+    parser.add_argument("--targets", type=number("--targets", 1, 10_000, int), metavar="N",
                         help="target placements per world (its own, then on its tables)")
     parser.add_argument("--start", type=floats(3, "--start"), action="append", metavar="X,Y,HEADING_DEG",
                         help="use these robot starts instead (repeatable)")
     parser.add_argument("--target", type=floats(4, "--target"), action="append", metavar="X,Y,Z,YAW_DEG",
                         help="use these target placements instead (repeatable)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N",
+    parser.add_argument("--jobs", type=number("--jobs", 1, 1024, int), default=os.cpu_count() or 1, metavar="N",
                         help="runs at once (default: the number of CPUs)")
     parser.add_argument("--budget-s", type=float, metavar="SECONDS",
                         help="robot-time budget K (default: the --config file's, 1800)")
@@ -579,16 +592,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, metavar="FILE.toml",
                         help="search configuration (SearchConfig) for every run; a folder swept with another "
                              "is refused")
-    parser.add_argument("--limit", type=int, metavar="N", help="only the first N runs of the grid")
-    parser.add_argument("--run-timeout-s", type=float, default=3600.0, metavar="SECONDS", help="wall clock per run")
+    parser.add_argument("--limit", type=number("--limit", 1, 10**9, int), metavar="N",
+                        help="only the first N runs of the grid")
+    parser.add_argument("--run-timeout-s", type=number("--run-timeout-s", 1.0, 1e7), default=3600.0, metavar="SECONDS",
+                        help="wall clock per run")
     parser.add_argument("--report-only", action="store_true", help="rewrite report.md and the plots from results.csv")
 
 
 def grid_from_args(args: argparse.Namespace) -> GridSpec:
     spec = PRESETS[args.preset]
-    given = {"worlds": args.worlds and expand_suites(args.worlds), "costs": args.costs, "priors": args.priors,
-             "seeds": args.seeds, "methods": args.methods, "starts": args.starts, "targets": args.targets,
-             "start_overrides": tuple(args.start or ()), "target_overrides": tuple(args.target or ())}
+    # a world in two of the names given (a suite and one of its rooms), or a start given twice, is one
+    given = {"worlds": args.worlds and tuple(dict.fromkeys(expand_suites(args.worlds))), "costs": args.costs,
+             "priors": args.priors, "seeds": args.seeds, "methods": args.methods, "starts": args.starts,
+             "targets": args.targets, "start_overrides": tuple(dict.fromkeys(args.start or ())),
+             "target_overrides": tuple(dict.fromkeys(args.target or ()))}
     spec = replace(spec, **{k: v for k, v in given.items() if v})
     if args.baselines:
         spec = replace(spec, methods=tuple(dict.fromkeys(spec.methods + BASELINE_METHODS)))

@@ -408,6 +408,8 @@ def robot_starts(world: WorldFacts, count: int = 5, margin_m: float = 0.45,
     chosen = [np.array(world.start[:2])]
     while len(chosen) < count and len(free):
         gaps = np.min([np.hypot(*(free - c).T) for c in chosen], axis=0)
+        if gaps.max() <= 0.0:  # every free spot chosen: a small room has fewer starts, none twice
+            break
         chosen.append(free[int(np.argmax(gaps))])
     centre = np.array(world.room_m[:2]) / 2
     starts = [tuple(world.start)]

@@ -54,6 +54,39 @@ def test_the_paper_preset_is_the_reports_160_runs():
     assert all(r.cost is None for r in with_baselines if r.method != "syt")
 
 
+def test_a_world_start_or_value_given_twice_is_run_once():
+    args = experiment_args("--preset", "paper", "--worlds", "paper-lab,paper-lab", "--seeds", "0,0", "--costs", "3,3",
+                           "--start", "1,1,0", "--start", "1,1,0", "--targets", "1", "--priors", "uniform")
+    runs = build_runs(experiment.grid_from_args(args))
+    assert len(runs) == len({r.key for r in runs}) == 1
+
+
+def test_a_small_room_gives_fewer_starts_rather_than_one_twice():
+    world = load_facts("hand/tiny")
+    many = robot_starts(world, 500)
+    assert 1 < len(many) < 500 and len(set(many)) == len(many)
+
+
+@pytest.mark.parametrize("flag, value", [("--jobs", "0"), ("--starts", "0"), ("--targets", "-1"), ("--limit", "0"),
+                                         ("--run-timeout-s", "0")])
+def test_counts_and_times_that_cannot_be_are_refused_by_name(flag, value, capsys):
+    """--jobs 0 hung the sweep; --starts 0 ran the preset's starts; --limit 0 the whole grid."""
+    with pytest.raises(SystemExit):
+        experiment_args(flag, value)
+    assert flag in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text", ['{"budget_s": nu', "[1, 2]"])
+def test_a_broken_settings_file_refuses_the_sweep_naming_it(tmp_path, monkeypatch, text):
+    monkeypatch.setattr(experiment, "_prepare", lambda todo, out: {})
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / experiment.SETTINGS_FILE).write_text(text)
+    with pytest.raises(experiment.SweepRefused, match="sweep.json is not the settings file this harness writes"):
+        experiment.sweep(build_runs(PAPER)[:1], experiment.SweepSettings(out, jobs=1))
+    assert (out / experiment.SETTINGS_FILE).read_text() == text  # kept as it was
+
+
 def test_paper_lab_targets_sit_on_table_tops_facing_open_floor_and_starts_are_free():
     world = load_facts("paper-lab")
     tables = world.tables()
