@@ -83,6 +83,9 @@ def finished_keys(results: Path) -> set[str]:
     if not results.is_file():
         return set()
     _set_torn_row_aside(results)
+    if results.stat().st_size == 0:  # killed before its header was whole: the next row writes one
+        results.unlink()
+        return set()
     with results.open(newline="") as f:
         if tuple(next(csv.reader(f), ())) != COLUMNS:
             raise ValueError(f"{results} has other columns than this harness writes: use another --out")

@@ -450,6 +450,17 @@ def test_a_row_cut_short_by_a_kill_is_set_aside_and_its_run_done_again(tmp_path,
     assert [r["seed"] for r in load_results(results)] == [0, 1]
 
 
+@pytest.mark.parametrize("cut_at", [0, 10])
+def test_a_header_cut_short_or_never_written_leaves_a_folder_that_resumes(tmp_path, caplog, cut_at):
+    """Killed inside the header (or before it), the folder used to refuse every resume: "other columns"."""
+    results = tmp_path / "results.csv"
+    row = _row(results, "syt", "office", "uniform", 0, 100.0, 30.0)
+    results.write_bytes(results.read_bytes()[:cut_at])
+    assert finished_keys(results) == set() and not results.exists()
+    append_row(results, row)
+    assert [r["key"] for r in load_results(results)] == [row["key"]]  # a header, then the row
+
+
 @pytest.mark.parametrize(("edit", "problem"), [
     (lambda text: text.replace(",key,", ",name,", 1), "results.csv: not an experiment's results.csv: no column key"),
     (lambda text: text.replace("\n", ",extra\n", 2).replace(",extra", "", 1), f"results.csv:2: {len(COLUMNS) + 1} fields where the header has {len(COLUMNS)}"),
