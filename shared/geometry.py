@@ -85,6 +85,17 @@ class Pose2D:
             heading,
         )
 
+    def compose(self, other: Pose2D) -> Pose2D:
+        """``other``, given in this pose's frame, in this pose's parent frame."""
+        c, s = math.cos(self.heading_rad), math.sin(self.heading_rad)
+        return Pose2D(self.x_m + c * other.x_m - s * other.y_m, self.y_m + s * other.x_m + c * other.y_m,
+                      wrap_angle(self.heading_rad + other.heading_rad))
+
+    def inverse(self) -> Pose2D:
+        """The parent frame's pose seen from this pose."""
+        c, s = math.cos(self.heading_rad), math.sin(self.heading_rad)
+        return Pose2D(-(c * self.x_m + s * self.y_m), s * self.x_m - c * self.y_m, wrap_angle(-self.heading_rad))
+
     def distance_to(self, x_m: float, y_m: float) -> float:
         return math.hypot(x_m - self.x_m, y_m - self.y_m)
 

@@ -250,10 +250,7 @@ class PioneerServerState:
 
     def odometry(self) -> Pose2D:
         """The plant's odometry in the frame of the last OPEN or SETO."""
-        pose, o = self._plant.reading().pose, self._origin
-        dx, dy = pose.x_m - o.x_m, pose.y_m - o.y_m
-        c, s = math.cos(o.heading_rad), math.sin(o.heading_rad)
-        return Pose2D(c * dx + s * dy, -s * dx + c * dy, wrap_angle(pose.heading_rad - o.heading_rad))
+        return self._origin.inverse().compose(self._plant.reading().pose)
 
     def sip(self) -> arcos.Sip:
         m, pose = self.motion, self.odometry()

@@ -409,23 +409,11 @@ class _Session:
         x_mm, y_mm = self._unwrap.update(sip.x_raw, sip.y_raw)
         local = Pose2D(x_mm / 1000.0, y_mm / 1000.0, sip.theta_rad)
         if self._origin is None:
-            self._origin = compose(self._continue_from, inverse(local))
+            self._origin = self._continue_from.compose(local.inverse())
         if self._last_heading is not None:
             self._heading_total += wrap_angle(sip.theta_rad - self._last_heading)
         self._last_heading = sip.theta_rad
-        return compose(self._origin, local), self._heading_total
-
-
-def compose(a: Pose2D, b: Pose2D) -> Pose2D:
-    """Pose ``b`` given in the frame of pose ``a``, expressed in ``a``'s parent frame."""
-    c, s = math.cos(a.heading_rad), math.sin(a.heading_rad)
-    return Pose2D(a.x_m + c * b.x_m - s * b.y_m, a.y_m + s * b.x_m + c * b.y_m, wrap_angle(a.heading_rad + b.heading_rad))
-
-
-def inverse(a: Pose2D) -> Pose2D:
-    """The parent frame's pose seen from ``a``."""
-    c, s = math.cos(a.heading_rad), math.sin(a.heading_rad)
-    return Pose2D(-(c * a.x_m + s * a.y_m), s * a.x_m - c * a.y_m, wrap_angle(-a.heading_rad))
+        return self._origin.compose(local), self._heading_total
 
 
 def _wait_for(port: serial.SerialBase, reader: PacketReader, wanted, timeout_s: float) -> Packet | None:

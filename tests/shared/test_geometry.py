@@ -44,6 +44,15 @@ def test_transform_inverse_and_compose():
     np.testing.assert_allclose(a.inverse().apply(a.apply(p)), p)
 
 
+def test_poses_compose_and_invert_as_their_transforms_do():
+    a, b = Pose2D(1.0, 2.0, 3.0), Pose2D(-0.3, 0.5, -2.0)  # headings that sum past pi: wrapped
+    for pose, transform in ((a.compose(b), a.to_transform().compose(b.to_transform())),
+                            (a.inverse(), a.to_transform().inverse())):
+        np.testing.assert_allclose(pose.to_transform().rotation, transform.rotation, atol=1e-12)
+        np.testing.assert_allclose(pose.to_transform().translation, transform.translation, atol=1e-12)
+    assert -math.pi <= a.compose(b).heading_rad < math.pi and a.compose(b).heading_rad == pytest.approx(1.0)
+
+
 def test_projection_of_pixel_rays_lands_on_the_pixels():
     k = Intrinsics.from_fov(640, 480, 66.0)
     assert k.fx_px == pytest.approx(492.8, abs=0.5)  # a Bumblebee2 with 3.8 mm lenses: 66° across 640 px

@@ -18,7 +18,7 @@ from onboard.emulators.pioneer import PioneerEmulator, PioneerEmulatorConfig, Pi
 from onboard.emulators.tcp import TcpPort
 from onboard.hardware import arcos
 from onboard.hardware.arcos import Command, build_packet
-from onboard.hardware.pioneer import PioneerBase, compose, inverse, probe
+from onboard.hardware.pioneer import PioneerBase, probe
 from onboard.sim.base import SimBase
 from shared.geometry import Pose2D
 from shared.limits import BaseLimits
@@ -51,12 +51,6 @@ def driver(emulator: PioneerEmulator, sim_base: SimBase) -> Iterator[PioneerBase
         yield base
     finally:
         base.close()
-
-
-def test_pose_helpers_invert():
-    a, b = Pose2D(1.0, 2.0, 0.7), Pose2D(-0.3, 0.5, -2.0)
-    back = compose(inverse(a), compose(a, b))
-    assert (back.x_m, back.y_m, back.heading_rad) == pytest.approx((b.x_m, b.y_m, b.heading_rad))
 
 
 def test_connect_identifies_enables_and_sets_limits(driver, emulator):
