@@ -126,8 +126,10 @@ class _PlannerWatch:
     gone: set[str] = field(default_factory=set)  # planners whose liveliness token was withdrawn, not renewed
     bad_heartbeat: bool = False  # the last sample on the heartbeat key was not one: said once, not at every beat
 
-    def heard(self, planner: str) -> None:
-        self.last_contact_s[planner] = time.monotonic()
+    def heard(self, planner: str, at_s: float | None = None) -> None:
+        """Word from ``planner`` at ``at_s`` (monotonic; default now): never earlier than word already heard."""
+        at_s = time.monotonic() if at_s is None else at_s
+        self.last_contact_s[planner] = max(at_s, self.last_contact_s.get(planner, at_s))
 
 
 class Agent:
@@ -139,8 +141,9 @@ class Agent:
         self.keys = RobotKeys(robot_id)
         self._sim = sim
         # each command with the number of stops heard before it: a motion that a later stop overtook is not started
-        # (_fresh_cancel), since a stop that found the queue full is not in it to stop the motion in its turn
-        self._commands: queue.Queue[tuple[str, zenoh.Query, int] | None] = queue.Queue(maxsize=64)
+        # (_fresh_cancel), since a stop that found the queue full is not in it to stop the motion in its turn;
+        # and when it arrived: that, not when the dispatcher takes it up, is when its planner was last heard
+        self._commands: queue.Queue[tuple[str, zenoh.Query, int, float] | None] = queue.Queue(maxsize=64)
         self._workers = {name: DeviceWorker(name) for name in ("base", "pantilt", "camera")}
         self._cancel = {"base": threading.Event(), "pantilt": threading.Event()}
         self._watch = _PlannerWatch()
@@ -202,6 +205,8 @@ class Agent:
             self._commands.put(None)
             for worker in self._workers.values():
                 worker.close()
+            for thread in self._threads:  # the publisher mid-tick must not put on an undeclared publisher
+                thread.join(timeout=2.0)
             for entity in self._declared + [getattr(self, "_token", None)]:
                 if entity is not None:
                     entity.undeclare()
@@ -214,7 +219,7 @@ class Agent:
             try:
                 with self._queue_lock:  # put_nowait never blocks
                     self._stops_heard += kind == "stop"
-                    self._commands.put_nowait((kind, query, self._stops_heard))
+                    self._commands.put_nowait((kind, query, self._stops_heard, time.monotonic()))
             except queue.Full:
                 self._reply_error(query, "", "busy", "command queue full; the agent is overloaded")
             finally:
@@ -249,14 +254,15 @@ class Agent:
 
     def _dispatch_loop(self) -> None:
         while (item := self._commands.get()) is not None:
-            kind, query, self._dispatching_after = item
+            kind, query, self._dispatching_after, arrived_s = item
             payload = query.payload.to_bytes() if query.payload is not None else b""
             try:
                 command = decode(payload, REQUEST_TYPES[kind])
                 if self._shutdown.is_set():
                     raise CommandRefused("shutdown", "the agent is shutting down")
                 if kind in _PLANNER_COMMANDS:  # a well-formed command, not any bytes on its key
-                    self._watch.heard(_sender(query))
+                    # a move that waited behind a stop's 2 s must not stretch a silent planner's watchdog
+                    self._watch.heard(_sender(query), arrived_s)
                 getattr(self, f"_on_{kind}")(query, command)
             except ProtocolError as exc:
                 log.warning("%s: malformed command: %s", kind, exc)

@@ -4,15 +4,17 @@ filled reliably)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
+import time
 
 import pytest
 from conftest import wait_until
 
 from onboard.agent import Agent
 from onboard.backends import build_robot
-from onboard.config import OnboardConfig
+from onboard.config import OnboardConfig, SimConfig
 from onboard.sim.world import load_world
 from shared import messages as m
 from shared.codec import decode, encode
@@ -91,3 +93,45 @@ def _answers(session, keys: RobotKeys) -> bool:
     except RobotUnavailable:
         return False
     return True
+
+
+def test_a_move_that_waited_in_the_queue_is_timed_by_the_watchdog_from_when_it_came():
+    """The dispatcher took a command's arrival to be when it took the command up: a move that waited
+    (behind a stop's wait for the base, up to 2 s) from a planner silent since gave that planner a
+    whole watchdog period more to drive in."""
+    config = dataclasses.replace(OnboardConfig(), sim=SimConfig(realtime=True))
+    robot = build_robot(config, load_world("paper-lab", robot_radius_m=config.base.radius_m))
+    base, keys = robot.devices.base, RobotKeys("waited")
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    stop, held, release = threading.Event(), threading.Event(), threading.Event()
+    with TransportConfig(listen=(endpoint,), multicast_scouting=False).open() as agent_session:
+        agent = Agent(config, robot.devices, agent_session, "waited", sim=robot.sim)
+        on_state = agent._on_state
+
+        def slow_first_state(query, cmd):
+            if cmd.command_id == "hold":
+                held.set()
+                assert release.wait(10.0)
+            on_state(query, cmd)
+        agent._on_state = slow_first_state
+        runner = threading.Thread(target=agent.run, args=(stop,))
+        runner.start()
+        try:  # a planner that sends no heartbeat: silent from its move on
+            with TransportConfig(robot_id="waited", connect=(endpoint,), multicast_scouting=False).open() as session:
+                assert wait_until(lambda: _answers(session, keys), 10.0), "the agent never answered"
+                before = base.true_pose
+                hold = session.get(keys.state, payload=encode(m.StateRequest("hold")), timeout=10.0)
+                assert held.wait(5.0)
+                move = session.get(keys.move, payload=encode(m.MoveCommand("waited", distance_m=2.0)), timeout=10.0)
+                assert wait_until(lambda: agent._commands.qsize() == 1, 5.0)
+                time.sleep(config.watchdog_ms / 1000.0 + 0.4)  # past the watchdog's period while it waits
+                release.set()
+                moved = decode(next(iter(move)).ok.payload.to_bytes(), m.MoveResult)
+                list(hold)
+        finally:
+            release.set()
+            stop.set()
+            runner.join(timeout=10.0)
+    assert moved.status == "stopped"
+    after = base.true_pose
+    assert math.hypot(after.x_m - before.x_m, after.y_m - before.y_m) < 0.03  # a watchdog period on: ~0.1 m
