@@ -59,7 +59,6 @@ class SimBase:
     def __init__(self, world: World, limits: BaseLimits, clock: SimClock, noise: OdometryNoise,
                  seed: int = 0, step_s: float = 0.02):
         self.limits = limits
-        self._world = world
         self._clock = clock
         self._noise = noise
         self._rng = np.random.default_rng(seed)
@@ -76,8 +75,7 @@ class SimBase:
         self._velocity_errors = (1.0, 1.0, 0.0)  # odometry errors of the current velocity-controlled motion
         room = world.room.size_m
         self._room_xy = (room[0], room[1])
-        self._blockers = np.array([[b.min_m[0], b.min_m[1], b.max_m[0], b.max_m[1]]
-                                   for b in world.base_blockers(limits.height_m)]).reshape(-1, 4)
+        self._blockers = self._blockers_of(world)
 
     # --- the Base protocol ---------------------------------------------------------------------------
 
@@ -115,13 +113,22 @@ class SimBase:
         with self._lock:
             return self._truth
 
-    def teleport(self, pose: Pose2D) -> str | None:
-        if self.collides(pose.x_m, pose.y_m):
+    def teleport(self, pose: Pose2D, world: World | None = None) -> str | None:
+        """Put the robot at ``pose``, in ``world`` if given (a new run's: its target moved, and the
+        base runs into a target on the floor where it is now, not where it was); the reason if it
+        cannot stand there (nothing changes then)."""
+        blockers = self._blockers if world is None else self._blockers_of(world)
+        if self._collides(pose.x_m, pose.y_m, blockers):
             return f"the robot cannot stand at ({pose.x_m:.3f}, {pose.y_m:.3f}): wall or obstacle"
         with self._lock:
             self._truth = self._odom = Pose2D(pose.x_m, pose.y_m, wrap_angle(pose.heading_rad))
             self._stalled = False
+            self._blockers = blockers
         return None
+
+    def _blockers_of(self, world: World) -> np.ndarray:
+        return np.array([[b.min_m[0], b.min_m[1], b.max_m[0], b.max_m[1]]
+                         for b in world.base_blockers(self.limits.height_m)]).reshape(-1, 4)
 
     def reseed(self, seed: int) -> None:
         """Draw the odometry errors afresh from ``seed`` (a new run repeats whatever came before)."""
@@ -129,10 +136,12 @@ class SimBase:
 
     def collides(self, x_m: float, y_m: float) -> bool:
         """Does the base's footprint disc at (x, y) overlap a wall or a low obstacle?"""
+        return self._collides(x_m, y_m, self._blockers)
+
+    def _collides(self, x_m: float, y_m: float, b: np.ndarray) -> bool:
         r = self.limits.radius_m
         if not (r <= x_m <= self._room_xy[0] - r and r <= y_m <= self._room_xy[1] - r):
             return True
-        b = self._blockers
         dx = np.maximum(np.maximum(b[:, 0] - x_m, x_m - b[:, 2]), 0.0)
         dy = np.maximum(np.maximum(b[:, 1] - y_m, y_m - b[:, 3]), 0.0)
         return bool(np.any(dx * dx + dy * dy < r * r))

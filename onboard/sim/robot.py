@@ -88,7 +88,7 @@ class SimRobot:
                 start.x_m, start.y_m, start.heading_rad)
         except WorldError as exc:
             return str(exc)
-        problem = self._base.teleport(start)
+        problem = self._base.teleport(start, world)
         if problem:
             return problem
         self._base.reseed(seed)
