@@ -362,7 +362,8 @@ def _parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="measure a part; prints one JSON object")
     bench.add_argument("what", choices=("perception", "planner", "navigation", "safety", "checkpoint", "stereo"))
     bench.add_argument("--json", action="store_true", help="print one JSON object (the only output form)")
-    bench.add_argument("--trials", type=int, default=20, help="safety: trials of each fault")
+    bench.add_argument("--trials", type=number("--trials", 1, 10_000, int), default=20,
+                       help="safety: trials of each fault")
     bench.add_argument("--lease-ms", type=int, default=DEFAULT_LEASE_MS, help="safety: the Zenoh link lease")
     bench.add_argument("--load", action="store_true", help="safety: also measure under load (4 state clients)")
     bench.add_argument("--views", type=Path, metavar="DIR", help="stereo: views from `syt-onboard worlds views`")
@@ -379,7 +380,8 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     from offboard.perception.detection.target_model import TargetModelError
-    from shared.rpc import RobotUnavailable
+    from shared.codec import ProtocolError
+    from shared.rpc import CommandError, RobotUnavailable
 
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
@@ -391,6 +393,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except RobotUnavailable as exc:  # the robot never came, or was lost: its checkpoint, if any, is kept
         log.error("%s (a search that wrote a checkpoint carries on with --resume DIR)", exc)
+        return 1
+    except (CommandError, ProtocolError) as exc:  # the robot refused a command (busy, a limit) or garbled a reply
+        log.error("the robot: %s", exc)
         return 1
 
 
