@@ -66,9 +66,11 @@ class Load:
         for client in self._clients:
             client.end()
         self._subscriber.undeclare()
-        gaps = np.diff(self._arrivals) * 1000.0 if len(self._arrivals) > 1 else np.array([np.inf])
+        # while the load ran only: finish() may come long after it (the search it loaded runs on)
+        during = [t for t in self._arrivals if self.started_s <= t <= self.started_s + self.seconds]
+        gaps = np.diff(during) * 1000.0 if len(during) > 1 else np.array([np.inf])
         return {"qps": sum(r["replies"] for r in reports) / self.seconds, "errors": sum(r["errors"] for r in reports),
-                "odometry_gap_ms_max": float(gaps.max()), "odometry_samples": len(self._arrivals)}
+                "odometry_gap_ms_max": float(gaps.max()), "odometry_samples": len(during)}
 
 
 def decision_times(rrd: Path, since_unix_s: float = 0.0, until_unix_s: float = float("inf")) -> dict[int, float]:
@@ -119,6 +121,9 @@ def measure_decisions(tmp: Path) -> dict:
     alone_ms = {a: float(np.median([run[a] for run in alone if a in run])) for a in loaded
                 if any(a in run for run in alone)}
     ratios = [loaded[a] / ms for a, ms in alone_ms.items()]
+    if not ratios:
+        raise RuntimeError(f"no decision of the loaded search fell within the {LOAD_S:g} s of load "
+                           f"(its recording: {rrd}): nothing to compare")
     return {
         "load_state_qps": round(totals["qps"], 1),
         "load_state_errors": totals["errors"],
