@@ -33,6 +33,7 @@ from offboard.robot.robot_client import RobotClient, RobotUnavailable
 from offboard.perception.voxel_grid import VoxelGrid
 from shared.codec import ProtocolError
 from shared.launch import onboard_agent
+from shared.limits import BaseLimits
 from shared.transport import TransportConfig
 from shared.world import load_world
 
@@ -149,16 +150,16 @@ def load_geometry_size(world_name: str) -> tuple[float, float, float]:
     return load_world(world_name).room.size_m
 
 
-def load_geometry(world_name: str, radius_m: float = 0.26, height_m: float = 1.35) -> FloorMap:
-    """The true configuration space on a fine grid: cells whose centre lies within ``radius_m`` of a
-    wall or of an obstacle lower than the robot (as the simulator's collision test has it)."""
+def load_geometry(world_name: str, limits: BaseLimits = BaseLimits()) -> FloorMap:
+    """The true configuration space on a fine grid: cells whose centre lies within the base's radius
+    of a wall or of what it runs into, the target included (the simulator's collision test exactly)."""
     world = load_world(world_name)
-    return true_floor_map(list(world.room.size_m[:2]), [(o.min_m, o.max_m) for o in world.obstacles
-                                                        if o.min_m[2] < height_m], radius_m)
+    return _configuration_space(list(world.room.size_m[:2]),
+                                [(b.min_m, b.max_m) for b in world.base_blockers(limits.height_m)], limits.radius_m)
 
 
-def true_floor_map(room_xy: list[float], boxes: list[tuple[list[float], list[float]]], radius_m: float,
-                   resolution_m: float = _TRUTH_RES_M) -> FloorMap:
+def _configuration_space(room_xy: list[float], boxes: list[tuple[list[float], list[float]]], radius_m: float,
+                         resolution_m: float = _TRUTH_RES_M) -> FloorMap:
     nx, ny = (int(math.ceil(s / resolution_m - 1e-9)) for s in room_xy)
     x, y = np.meshgrid((np.arange(nx) + 0.5) * resolution_m, (np.arange(ny) + 0.5) * resolution_m, indexing="ij")
     blocked = (x < radius_m) | (y < radius_m) | (x > room_xy[0] - radius_m) | (y > room_xy[1] - radius_m)
