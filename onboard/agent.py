@@ -386,7 +386,8 @@ class Agent:
         self._reply(query, m.Info(cmd.command_id, self.keys.robot_id, d.backend, d.base.limits,
                                   d.pantilt.limits, self.config.timing,
                                   m.IntrinsicsMsg.from_intrinsics(d.camera.intrinsics),
-                                  m.MountMsg.from_mount(d.camera.mount), self.config.watchdog_ms))
+                                  m.MountMsg.from_mount(d.camera.mount), self.config.watchdog_ms,
+                                  d.clock.realtime))
 
     def _on_sim_truth(self, query: zenoh.Query, cmd: m.StateRequest) -> None:
         self._reply(query, m.SimTruth(cmd.command_id, m.PoseMsg.from_pose(self._sim.true_pose),

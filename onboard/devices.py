@@ -60,6 +60,8 @@ class StereoImages:
 class Clock(Protocol):
     """The robot's clock. The simulator's runs as fast as the machine allows unless paced."""
 
+    realtime: bool  # the wall clock: it runs on while the planner processes, not only with actions
+
     def now_s(self) -> float: ...
 
 

@@ -274,6 +274,9 @@ class Info:
     intrinsics: IntrinsicsMsg
     mount: MountMsg
     watchdog_ms: int = field(metadata=bounds(1, 3_600_000))
+    # the robot's clock is the wall clock (hardware, a paced simulator): it runs on while the planner
+    # processes, so processing is part of robot time; a fast simulator's clock advances with actions only
+    wall_clock: bool = False
 
 
 HEARTBEAT_PERIOD_S = 0.2  # the planner's beat; the agent's watchdog waits for at least three

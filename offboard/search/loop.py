@@ -9,7 +9,9 @@ budget K is spent, or no reachable action is worth its time.
 Time is honest: every action's motion (robot clock: driving, slewing, capture) and its processing
 (wall clock: capture transfer, stereo, detection, mapping, the belief's update and the dynamic
 priors', planning) are measured and reported apart; the planner's t(f) includes the mean processing
-measured so far.
+measured so far. On a robot whose clock is the wall clock (``Info.wall_clock``: hardware, a paced
+simulator) processing passes on that clock too: motion is robot time less the processing within it,
+and the budget K counts robot time alone.
 The environment is unknown: the planner never reads a world file, only the room's boundary
 (report §3.1: "we assume that boundaries of Ω are known exactly").
 
@@ -244,8 +246,14 @@ class Search:
         return self.robot.state().robot_time_s - self._clock_start_s
 
     def elapsed_s(self) -> float:
-        """Time spent so far, as the budget K counts it: robot motion plus measured processing."""
-        return self.robot_time_s() + self.state.processing_s
+        """Time spent so far, as the budget K counts it: robot motion plus measured processing (on a
+        robot whose clock is the wall clock, processing is already in its time)."""
+        return self.robot_time_s() + (0.0 if self.info.wall_clock else self.state.processing_s)
+
+    def _motion_s(self, robot_s: float, processing_s: float) -> float:
+        """The motion in ``robot_s`` of robot time, ``processing_s`` of processing done within the same
+        span: on a wall clock that processing passed on the robot's clock too."""
+        return max(0.0, robot_s - processing_s) if self.info.wall_clock else robot_s
 
     def _pose(self) -> Pose2D:
         return self.tracker.world_pose(self.robot.state().pose.to_pose())
@@ -323,8 +331,8 @@ class Search:
         result = self.navigator.go_to(goal, squeeze=squeezed, observe=self._glance,
                                       confident=squeezed and self._squeeze_to[1])
         self._squeeze_to = None
-        motion_s = self.robot_time_s() - before
         processing_s, self._glance_recording_s = result.processing_s - self._glance_recording_s, 0.0
+        motion_s = self._motion_s(self.robot_time_s() - before, result.processing_s)
         self.state.motion_s += motion_s
         self.state.processing_s += processing_s
         self.state.driving_s += motion_s + (0.0 if self.config.planned_processing_s else processing_s)
@@ -364,7 +372,7 @@ class Search:
         self._pan_tilt = (plan.pan_rad, plan.tilt_rad)
         started = time.perf_counter()
         capture = self.robot.capture()
-        motion_s = self.robot_time_s() - before
+        motion_s = self._motion_s(self.robot_time_s() - before, time.perf_counter() - started)  # the transfer
         name, (detector, table) = self._choose_detector(decision)
         new = self._new_view(capture)
         obs = self.perception.observe(capture, self.tracker.world_pose(capture.pose.to_pose()),
