@@ -90,11 +90,13 @@ class Checkpoint:
 
     @property
     def wall_time_s(self) -> float:
-        return float(self.header["wall_time_s"])
+        with _damaged(self.path, "wall_time_s"):
+            return float(self.header["wall_time_s"])
 
     @property
     def actions(self) -> int:
-        return int(self.header["search"]["state"]["actions"])
+        with _damaged(self.path, "search.state.actions"):
+            return int(self.header["search"]["state"]["actions"])
 
 
 @contextlib.contextmanager
@@ -159,6 +161,8 @@ def capture(search: Search) -> tuple[dict, dict[str, np.ndarray]]:
     header["search"] = {
         "state": state_plain(search.state),
         "clock_start_s": float(search._clock_start_s),
+        "robot_id": search.info.robot_id,
+        "robot_clock_s": float(search._clock_start_s + search.robot_time_s()),  # the robot's own clock, now
         "pending_processing_s": float(search._pending_processing_s),
         "planner_processing_s": float(search.planner.time_model.processing_s),
         "tracker": search.tracker.state(),
@@ -228,6 +232,7 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
         state = state_from_plain(part["state"])
         clock_start_s, pending_s, planner_s = (float(part[k]) for k in ("clock_start_s", "pending_processing_s",
                                                                          "planner_processing_s"))
+        _check_same_robot(search, checkpoint, part["robot_id"], float(part["robot_clock_s"]))
         search.belief.restore(belief)
         with search.occupancy.edit() as (log_odds, was_observed):
             log_odds[:], was_observed[:] = odds, observed
@@ -242,6 +247,21 @@ def restore(search: Search, checkpoint: Checkpoint) -> None:
     search.measure_driving()
     _restore_priors(search, checkpoint)
     log.info("resumed after action %d (P[F] = %.3f)", search.state.actions, search.belief.success_prob)
+
+
+def _check_same_robot(search: Search, checkpoint: Checkpoint, robot_id: str, robot_clock_s: float) -> None:
+    """The map, the belief and the pose offset are in the odometry frame of the robot that made
+    them, as it ran then: another robot, or the same one restarted (its clock and odometry begin
+    afresh), would read them in a frame they are not in."""
+    if search.info.robot_id != robot_id:
+        raise CheckpointError(f"{checkpoint.path}: robot", search.info.robot_id,
+                              f"the checkpoint is of robot {robot_id!r}")
+    now_s = search._clock_start_s  # the robot's clock as the resumed search started
+    if now_s < robot_clock_s:
+        raise CheckpointError(f"{checkpoint.path}: robot", now_s,
+                              f"its clock is behind the checkpoint's {robot_clock_s:.1f} s: the robot's agent "
+                              "restarted, and its odometry with it, so the saved map and pose no longer line up; "
+                              "start a new search")
 
 
 def _view(plain: list[float]) -> RigidTransform:
@@ -382,7 +402,9 @@ def read(folder: Path) -> Checkpoint:
         raise CheckpointError(f"{path}: {missing[0]}", None, "missing from the checkpoint's header")
     start = _aligned(len(MAGIC) + 8 + length)
     arrays = {}
-    for name, entry in header.pop("arrays").items():
+    with _damaged(path, "arrays"):
+        listed = dict(header.pop("arrays"))
+    for name, entry in listed.items():
         with _damaged(path, f"arrays.{name}"):
             dtype, shape = np.dtype(entry["dtype"]), tuple(entry["shape"])
             count = int(np.prod(shape, dtype=np.int64))

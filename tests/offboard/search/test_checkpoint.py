@@ -3,7 +3,9 @@ search whose planner is SIGKILLed carries on with ``--resume`` and finds the tar
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import struct
 import math
 import signal
 import subprocess
@@ -184,6 +186,19 @@ def test_a_checkpoint_with_a_part_missing_or_mistyped_is_refused_naming_the_part
     path.write_bytes(data.replace(b'"dtype": ' + dtype, b'"dtype": "zzz"', 1))  # one numpy has not, as long
     with pytest.raises(CheckpointError, match=r"arrays\.belief\.\w+: .*TypeError"):
         checkpoint.read(tmp_path)
+    checkpoint.write_file(path, {**header, "wall_time_s": None}, arrays)  # a TypeError, a KeyError escaped
+    read = checkpoint.read(tmp_path)
+    with pytest.raises(CheckpointError, match=r"wall_time_s: damaged"):
+        read.wall_time_s
+    with pytest.raises(CheckpointError, match=r"search\.state\.actions: .*missing 'state'"):
+        read.actions
+    data, start = path.read_bytes(), len(checkpoint.MAGIC)
+    (length,) = struct.unpack_from("<Q", data, start)
+    listed = {**json.loads(data[start + 8:start + 8 + length]), "arrays": [1, 2]}  # a list, not a table
+    text = json.dumps(listed).encode()
+    path.write_bytes(checkpoint.MAGIC + struct.pack("<Q", len(text)) + text + data[start + 8 + length:])
+    with pytest.raises(CheckpointError, match=r"arrays: damaged or from another version"):
+        checkpoint.read(tmp_path)
 
 def test_the_command_line_says_what_is_missing(tmp_path):
     from offboard.cli import main
@@ -210,6 +225,22 @@ def test_the_dynamic_priors_memory_comes_back(sim_agent, tmp_path):
     with_one_more = search_on(sim_agent[1], dynamic_priors(("surfaces", "saliency"), grid, model) * 2)
     with pytest.raises(CheckpointError, match="no memory for this search's dynamic prior"):
         checkpoint.restore(with_one_more, saved)
+
+
+@pytest.mark.integration
+def test_a_checkpoint_resumes_on_its_own_robot_only_and_not_after_that_robot_restarted(sim_agent, tmp_path):
+    """The map and the pose offset are in the odometry frame of the robot as it ran: another robot id,
+    or a clock behind the checkpoint's (its agent restarted, odometry and clock from zero), was resumed."""
+    search = search_on(sim_agent[1])
+    search._look(Decision("look", "level", azimuth_rad=math.radians(90), tilt_rad=0.0, setting=0))
+    saved = saved_and_read(tmp_path, search)
+    checkpoint.restore(search_on(sim_agent[1]), saved)  # the same robot, its clock on: resumed
+    part = saved.header["search"]
+    for change, says in (({"robot_id": "pioneer2"}, "the checkpoint is of robot 'pioneer2'"),
+                         ({"robot_clock_s": part["robot_clock_s"] + 600.0}, "the robot's agent restarted")):
+        other = dataclasses.replace(saved, header={**saved.header, "search": {**part, **change}})
+        with pytest.raises(CheckpointError, match=says):
+            checkpoint.restore(search_on(sim_agent[1]), other)
 
 
 # --- a killed planner, resumed ---------------------------------------------------------------------
