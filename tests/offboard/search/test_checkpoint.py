@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import struct
 import math
 import signal
+import struct
 import subprocess
 import sys
 import time
