@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import running_agent
-from offboard.bench.navigation import true_floor_map
+from offboard.bench.navigation import load_geometry
 from offboard.navigation.grid_planner import is_free, path_length_m, shortest_path
 from offboard.navigation.localization import PoseTracker
 from offboard.navigation.navigator import Navigator, NavigatorConfig, _Run, retry_busy
@@ -17,7 +17,6 @@ from offboard.navigation.tangent_bug import TangentBug
 from offboard.perception.occupancy import OccupancyGrid
 from offboard.perception.stereo import StereoConfig
 from offboard.perception.voxel_grid import VoxelGrid
-from onboard.sim.world import load_world
 from shared.geometry import Pose2D, wrap_angle
 
 pytestmark = pytest.mark.integration
@@ -71,9 +70,7 @@ def navigate(robot, start, goal):
 
 
 def true_shortest(world_path, start, goal):
-    world = load_world(world_path)
-    boxes = [(b.min_m, b.max_m) for b in world.floor_obstacles()]
-    return path_length_m(shortest_path(true_floor_map(world.room.size_m[:2], boxes, 0.26), start, goal))
+    return path_length_m(shortest_path(load_geometry(str(world_path)), start, goal))
 
 
 def test_reaches_a_goal_behind_the_u_without_touching_anything(agent, world_path):
