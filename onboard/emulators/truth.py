@@ -19,7 +19,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import math
 import socket
 import socketserver
 import threading
@@ -29,6 +28,7 @@ from pathlib import Path
 
 from onboard.devices import DeviceFault, PanTiltReading
 from shared.geometry import Pose2D
+from shared.strict import finite_float
 from shared.world import World, resolve_world
 
 log = logging.getLogger(__name__)
@@ -102,7 +102,7 @@ def truth_from_dict(d: dict) -> Truth:
         raise TruthLinkError(f"truth link: a truth reply lacks {', '.join(missing)}")
     for key in _TRUTH_NUMBERS:
         value = d[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite(value):
+        if not _is_number(value):
             raise TruthLinkError(f"truth link: a truth reply's {key} must be a finite number, got {value!r}")
     if not isinstance(d["head_moving"], bool):
         raise TruthLinkError(f"truth link: a truth reply's head_moving must be true or false, got {d['head_moving']!r}")
@@ -113,11 +113,13 @@ def truth_from_dict(d: dict) -> Truth:
 _TRUTH_NUMBERS = ("x_m", "y_m", "heading_rad", "pan_rad", "tilt_rad")
 
 
-def _finite(value: int | float) -> bool:
+def _is_number(value: object) -> bool:
+    """A finite JSON number: not true or false, not a string, not an integer beyond any float."""
     try:
-        return math.isfinite(value)
-    except OverflowError:  # a JSON integer beyond any float
+        finite_float(value)
+    except ValueError:
         return False
+    return True
 
 
 def placement_from_dict(d: dict) -> WorldPlacement:
@@ -134,7 +136,7 @@ def placement_from_dict(d: dict) -> WorldPlacement:
 def _numbers(d: dict, key: str, count: int) -> tuple[float, ...]:
     value = d[key]
     if (not isinstance(value, list) or len(value) != count
-            or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not _finite(v) for v in value)):
+            or not all(_is_number(v) for v in value)):
         raise TruthLinkError(f"truth link: a world reply's {key} must be {count} finite numbers, got {value!r}")
     return tuple(float(v) for v in value)
 
