@@ -122,7 +122,8 @@ def build_runs(spec: GridSpec) -> list[Run]:
                                                                      spec.methods):
             costs = spec.costs if method == "syt" else (None,)  # the cost function is SYT's alone
             runs += [Run(method, name, start, target, c, prior, seed) for c in costs]
-    # one run a key (two names of one world file, two equal placements): a run twice would be done twice
+    # one run a key: a world, start, seed or value given twice (a suite and one of its rooms, say)
+    # would be done twice into one folder
     unique: dict[str, Run] = {}
     for run in runs:
         unique.setdefault(run.key, run)
@@ -557,7 +558,7 @@ def _list(kind: type, allowed: tuple | None = None):
         bad = [v for v in values if allowed is not None and v not in allowed]
         if bad or not values:
             raise argparse.ArgumentTypeError(f"{text!r}: choose from {', '.join(map(str, allowed or ()))}")
-        return tuple(dict.fromkeys(values))  # a value given twice would run its runs twice
+        return values
     return parse
 
 
@@ -601,11 +602,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def grid_from_args(args: argparse.Namespace) -> GridSpec:
     spec = PRESETS[args.preset]
-    # a world in two of the names given (a suite and one of its rooms), or a start given twice, is one
-    given = {"worlds": args.worlds and tuple(dict.fromkeys(expand_suites(args.worlds))), "costs": args.costs,
-             "priors": args.priors, "seeds": args.seeds, "methods": args.methods, "starts": args.starts,
-             "targets": args.targets, "start_overrides": tuple(dict.fromkeys(args.start or ())),
-             "target_overrides": tuple(dict.fromkeys(args.target or ()))}
+    given = {"worlds": args.worlds and expand_suites(args.worlds), "costs": args.costs, "priors": args.priors,
+             "seeds": args.seeds, "methods": args.methods, "starts": args.starts, "targets": args.targets,
+             "start_overrides": tuple(args.start or ()), "target_overrides": tuple(args.target or ())}
     spec = replace(spec, **{k: v for k, v in given.items() if v})
     if args.baselines:
         spec = replace(spec, methods=tuple(dict.fromkeys(spec.methods + BASELINE_METHODS)))
