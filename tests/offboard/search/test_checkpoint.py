@@ -230,7 +230,8 @@ def test_the_dynamic_priors_memory_comes_back(sim_agent, tmp_path):
 @pytest.mark.integration
 def test_a_checkpoint_resumes_on_its_own_robot_only_and_not_after_that_robot_restarted(sim_agent, tmp_path):
     """The map and the pose offset are in the odometry frame of the robot as it ran: another robot id,
-    or a clock behind the checkpoint's (its agent restarted, odometry and clock from zero), was resumed."""
+    or a clock behind the checkpoint's (its agent restarted, odometry and clock from zero), was resumed;
+    and in the grid of the configuration it ran with."""
     search = search_on(sim_agent[1])
     search._look(Decision("look", "level", azimuth_rad=math.radians(90), tilt_rad=0.0, setting=0))
     saved = saved_and_read(tmp_path, search)
@@ -241,6 +242,11 @@ def test_a_checkpoint_resumes_on_its_own_robot_only_and_not_after_that_robot_res
         other = dataclasses.replace(saved, header={**saved.header, "search": {**part, **change}})
         with pytest.raises(CheckpointError, match=says):
             checkpoint.restore(search_on(sim_agent[1]), other)
+    # run_search builds a resumed search from the checkpoint's own configuration; one built from another
+    # (a config file edited since) would carry on with settings the saved part of the search never had
+    edited = SearchConfig(planned_processing_s=0.5)
+    with pytest.raises(CheckpointError, match="the search's configuration is not the checkpoint's"):
+        checkpoint.restore(search_on(sim_agent[1], config=edited), saved)
 
 
 # --- a killed planner, resumed ---------------------------------------------------------------------
