@@ -384,15 +384,14 @@ class PoseTracker:
     def predict(self, odom: Pose2D) -> Pose2D:
         """Move the estimate with the odometry since the last call and grow its covariance."""
         prev, self._odom = self._odom, odom
-        c, s = math.cos(prev.heading_rad), math.sin(prev.heading_rad)
-        fx = c * (odom.x_m - prev.x_m) + s * (odom.y_m - prev.y_m)
-        fy = -s * (odom.x_m - prev.x_m) + c * (odom.y_m - prev.y_m)
+        step = prev.inverse().compose(odom)  # the motion in the frame of the base where it began
+        fx, fy = step.x_m, step.y_m
         distance = math.hypot(fx, fy)
         reverse = fx < 0.0  # backing off: the base did not turn round first
         # under a centimetre the displacement is odometry's jitter: its direction is no turn the base made
         travelled = distance > _STILL_M
         turn_in = (math.atan2(-fy, -fx) if reverse else math.atan2(fy, fx)) if travelled else 0.0
-        turn_out = wrap_angle(odom.heading_rad - prev.heading_rad - turn_in)
+        turn_out = wrap_angle(step.heading_rad - turn_in)
         direction = self.pose.heading_rad + turn_in + (math.pi if reverse else 0.0)
         self.covariance = _propagate(self.covariance, direction, distance, turn_in, turn_out, self.model)
         self.pose = self.world_pose(odom)
