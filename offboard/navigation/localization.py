@@ -385,12 +385,12 @@ class PoseTracker:
         """Move the estimate with the odometry since the last call and grow its covariance."""
         prev, self._odom = self._odom, odom
         step = prev.inverse().compose(odom)  # the motion in the frame of the base where it began
-        fx, fy = step.x_m, step.y_m
-        distance = math.hypot(fx, fy)
-        reverse = fx < 0.0  # backing off: the base did not turn round first
+        distance = math.hypot(step.x_m, step.y_m)
         # under a centimetre the displacement is odometry's jitter: its direction is no turn the base made
-        travelled = distance > _STILL_M
-        turn_in = (math.atan2(-fy, -fx) if reverse else math.atan2(fy, fx)) if travelled else 0.0
+        if distance > _STILL_M:
+            turn_in, reverse = _first_turn(step)
+        else:
+            turn_in, reverse = 0.0, False
         turn_out = wrap_angle(step.heading_rad - turn_in)
         direction = self.pose.heading_rad + turn_in + (math.pi if reverse else 0.0)
         self.covariance = _propagate(self.covariance, direction, distance, turn_in, turn_out, self.model)
@@ -441,6 +441,19 @@ class PoseTracker:
         c, s = math.cos(self._rotation), math.sin(self._rotation)
         self._translation = (self.pose.x_m - (c * odom.x_m - s * odom.y_m),
                              self.pose.y_m - (s * odom.x_m + c * odom.y_m))
+
+
+def _first_turn(step: Pose2D) -> tuple[float, bool]:
+    """The turn before the drive of an odometry ``step`` (in the frame where it began), and whether the
+    drive was backwards. A step ending behind the base is a back-off (no turn, then reverse) or a turn
+    past 90° then a forward drive (``move_to`` to a waypoint behind): whichever turns the base less."""
+    forward = math.atan2(step.y_m, step.x_m)
+    backward = math.atan2(-step.y_m, -step.x_m)
+
+    def turning(turn_in: float) -> float:
+        return abs(turn_in) + abs(wrap_angle(step.heading_rad - turn_in))
+
+    return (backward, True) if turning(backward) < turning(forward) else (forward, False)
 
 
 def _propagate(cov: np.ndarray, direction: float, distance: float, turn_in: float, turn_out: float,
