@@ -187,7 +187,7 @@ class TangentBug:
         c, x = self.config, scan.origin
         goal_visible = math.dist(x, self.goal) <= c.sensor_range_m and segment_is_free(floor_map, x, self.goal)
         reach = 0.0 if goal_visible else d_reach(scan, self.goal)
-        if reach == 0.0 or reach < min(self._d_followed, self._leave_bound) - c.progress_m:
+        if goal_visible or reach < min(self._d_followed, self._leave_bound) - c.progress_m:
             self._leave_bound, self.mode, self._h_min, self._visited = reach, "to_goal", math.inf, []
             log.debug("leaving the boundary at (%.2f, %.2f): d_reach %.2f, d_followed %.2f", *x, reach,
                       self._d_followed)

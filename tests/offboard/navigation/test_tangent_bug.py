@@ -141,6 +141,17 @@ def test_goal_inside_an_obstacle_is_unreachable():
     assert step.status == "unreachable"
 
 
+def test_a_blocked_goal_straight_along_a_scan_ray_is_unreachable_not_endless():
+    """The ray at 0° passes through the goal (on the map's edge, blocked), so the closest free point
+    in sight is 0 m from it: once taken for "the goal is in sight", leaving and following called each
+    other until Python's recursion limit."""
+    fmap = floor_map(np.zeros((40, 40), bool))
+    goal = (2.0, 1.025)
+    assert not is_free(fmap, goal)
+    step, _, _ = drive(fmap, (1.025, 1.025), goal)
+    assert step.status == "unreachable"
+
+
 def test_following_is_bounded_by_max_follow():
     fmap = floor_map(u_shape(), RADIUS)
     step, travelled, _ = drive(fmap, (1.0, 3.0), (4.9, 1.6), config=BugConfig(max_follow_m=3.0, loop_radius_m=0.01))
