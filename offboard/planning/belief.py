@@ -134,8 +134,9 @@ class TargetBelief:
         if factors.max() * max(self._stored_total, 1.0) > _FLOAT32_MAX / 2:  # stored masses ≤ their total
             raise ValueError(f"reweighting factors up to {factors.max():g} overflow the float32 masses")
         factors = factors.astype(np.float32)
-        if not factors.any():
-            raise ValueError("reweighting factors are all zero (in float32): p(c_out) would become 1")
+        if not factors[self._mass.any(axis=-1)].any():  # checked first: the product cannot be undone
+            raise ValueError("reweighting factors are zero (in float32) on every cube that holds mass: "
+                             "p(c_out) would become 1")
         inside_before = self._mass.sum(dtype=np.float64)
         self._mass *= factors[..., None]
         self._keep_inside_total(inside_before)

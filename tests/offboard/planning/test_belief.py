@@ -361,14 +361,27 @@ def test_an_observation_leaving_nothing_is_refused_though_the_running_total_drif
 
 
 @pytest.mark.parametrize("factors, match", [(np.full(GRID.shape, 1e39), "overflow"),
-                                            (np.zeros(GRID.shape), "all zero"),
-                                            (np.full(GRID.shape, 1e-50), "all zero")])
+                                            (np.zeros(GRID.shape), "zero"),
+                                            (np.full(GRID.shape, 1e-50), "zero")])
 def test_reweighting_that_would_overflow_or_empty_the_room_is_refused(factors, match):
     """A finite factor past float32's range made every mass NaN; all-zero factors moved p(c_out) to 1."""
     belief = TargetBelief(GRID, facing_sectors=2)
     with pytest.raises(ValueError, match=match):
         belief.reweight(factors)
     assert belief.prob_outside == pytest.approx(0.05) and np.isfinite(belief.target_prob).all()
+
+
+def test_reweighting_only_cubes_already_ruled_out_is_refused_and_changes_nothing():
+    """Factors non-zero only where no mass is left passed the all-zero check and moved p(c_out) to 1."""
+    belief = TargetBelief(GRID, facing_sectors=2)
+    empty = np.zeros(GRID.shape, bool)
+    empty[:10] = True
+    belief.reweight((~empty).astype(float))  # the first ten slabs ruled out
+    before = belief.target_prob.copy()
+    with pytest.raises(ValueError, match="every cube that holds mass"):
+        belief.reweight(empty * 2.0)
+    np.testing.assert_array_equal(belief.target_prob, before)
+    assert belief.prob_outside == pytest.approx(0.05)
 
 
 def test_a_factor_of_zero_on_some_cubes_rules_them_out():
