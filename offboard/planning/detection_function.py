@@ -67,6 +67,10 @@ def look_footprint(grid: VoxelGrid, camera_in_world: RigidTransform, intrinsics:
     """
     near, far = table.range_m
     k = intrinsics
+    blocks = (-(-k.height_px // block_px), -(-k.width_px // block_px))
+    if np.shape(depth_z) != blocks:  # the kernel reads it by block without bounds checks
+        raise ValueError(f"depth_z must hold one depth per {block_px}-pixel block, shape {blocks}, "
+                         f"not {np.shape(depth_z)}")
     lo, hi = _frustum_bounds(grid, camera_in_world, k, far)
     camera = np.array([k.fx_px, k.fy_px, k.cx_px, k.cy_px, k.width_px, k.height_px, block_px,
                        near, far, behind_surface_m])

@@ -231,6 +231,16 @@ def test_footprint_is_the_visible_part_of_the_view_inside_the_detector_range():
     assert (back.detection_prob[:, 0] == 0).all() and (back.detection_prob[:, 1] > 0).mean() > 0.8
 
 
+@pytest.mark.parametrize("block_px, depth_shape", [(16, (1, 1)), (8, (30, 40))])
+def test_a_depth_image_of_another_block_size_is_refused_not_read_past(block_px, depth_shape):
+    """The kernel reads depth_z by pixel block: a 1×1 map "saw" 41,967 cubes, one made for 16-pixel
+    blocks read as 8 (one quarter of it) gave 40,252 cubes where 68,386 were in view."""
+    cam = MOUNT.camera_in_world(Pose2D(0.5, 1.5, 0.0), 0.0, 0.0)
+    with pytest.raises(ValueError, match=f"depth_z must hold one depth per {block_px}-pixel block"):
+        look_footprint(ROOM, cam, K, np.ones(depth_shape, np.float32), block_px,
+                       DetectabilityTable.nominal(near_m=0.4, far_m=3.0), np.array([math.pi]), 0.1)
+
+
 def test_footprint_reaches_the_detector_range_straight_ahead():
     """A camera looking along a room axis sees the middle of its view out to the detector's far
     range, though the image's corners reach only 0.78 of it that far ahead (66° × 52° field)."""
