@@ -136,6 +136,9 @@ class OccupancyGrid:
         k, c = intrinsics, self.config
         _check_stereo(k, baseline_m, camera_in_world)
         u, v, d = (np.ascontiguousarray(a, np.float64) for a in (u_px, v_px, d_px))
+        if not (u.ndim == v.ndim == d.ndim == 1 and len(u) == len(v) == len(d)):  # the kernel pairs them by index
+            raise ValueError(f"stereo points need u, v and d of one length each, not shapes {u.shape}, {v.shape}, "
+                             f"{d.shape}")
         # an infinite disparity is depth 0 (eq. 6): it would mark the camera's own cube occupied
         valid = np.isfinite(d) & (d > 0)
         range_px = k.fx_px * baseline_m / c.max_range_m  # the disparity at max range
@@ -155,6 +158,8 @@ class OccupancyGrid:
     def integrate_disparity(self, disparity: np.ndarray, intrinsics: Intrinsics, baseline_m: float,
                             camera_in_world: RigidTransform) -> int:
         """Integrate every ``point_stride_px``-th valid pixel of a disparity image (NaN = invalid)."""
+        if np.ndim(disparity) != 2:
+            raise ValueError(f"a disparity image is 2-D (rows, columns), not of shape {np.shape(disparity)}")
         s = self.config.point_stride_px
         sub = disparity[s // 2::s, s // 2::s]
         v, u = np.nonzero(np.isfinite(sub) & (sub > 0))
@@ -256,6 +261,8 @@ def _check_stereo(k: Intrinsics, baseline_m: float, camera_in_world: RigidTransf
     if not (baseline_m > 0 and k.fx_px > 0 and k.fy_px > 0):  # else points land behind the camera
         raise ValueError(f"stereo needs a positive baseline and focal length, not {baseline_m} m and "
                          f"{k.fx_px}/{k.fy_px} px")
+    if not (math.isfinite(k.cx_px) and math.isfinite(k.cy_px)):  # NaN dropped every point, unsaid
+        raise ValueError(f"stereo needs a finite principal point, not cx {k.cx_px} / cy {k.cy_px} px")
     for name in ("rotation", "translation"):  # NaN dropped the frame or updated stray cubes, unsaid
         value = np.asarray(getattr(camera_in_world, name))
         if not np.isfinite(value).all():

@@ -124,6 +124,28 @@ def test_a_frame_from_a_non_finite_pose_is_refused(part):
         OccupancyGrid(ROOM).integrate_disparity(_wall_disparity(3.0), K, MOUNT.baseline_m, lost)
 
 
+@pytest.mark.parametrize("field", ["cx_px", "cy_px"])
+def test_a_frame_from_a_camera_with_no_principal_point_is_refused(field):
+    """A NaN principal point dropped every point of the frame and marked only the camera's cube free."""
+    lost = dataclasses.replace(K, **{field: float("nan")})
+    with pytest.raises(ValueError, match="finite principal point"):
+        OccupancyGrid(ROOM).integrate_disparity(_wall_disparity(3.0), lost, MOUNT.baseline_m, _facing_east())
+
+
+@pytest.mark.parametrize("u, v, d, says", [
+    (np.zeros(3), np.zeros(2), np.ones(3), "one length each"),  # once a bare IndexError in the kernel
+    (np.zeros((2, 2)), np.zeros((2, 2)), np.ones((2, 2)), "one length each"),
+])
+def test_stereo_points_that_do_not_pair_up_are_refused(u, v, d, says):
+    with pytest.raises(ValueError, match=says):
+        OccupancyGrid(ROOM).integrate(u, v, d, K, MOUNT.baseline_m, _facing_east())
+
+
+def test_a_disparity_image_that_is_not_2d_is_refused():
+    with pytest.raises(ValueError, match="disparity image is 2-D"):
+        OccupancyGrid(ROOM).integrate_disparity(np.ones(640, np.float32), K, MOUNT.baseline_m, _facing_east())
+
+
 def test_log_odds_stop_at_the_clamps():
     occ = OccupancyGrid(ROOM)
     for _ in range(6):  # +1 a frame on the wall, -0.4 before it: past both clamps (a changed world is re-learnt)
