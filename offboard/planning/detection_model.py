@@ -63,11 +63,13 @@ def located_along_rays(grid: VoxelGrid, cube_index: np.ndarray, box_px: tuple[fl
     return _normalised(inside.astype(np.float64))
 
 
-def depth_sigma_m(distance_m: float, intrinsics: Intrinsics, baseline_m: float, base_sigma_m: float,
-                  disparity_sigma_px: float = 0.5) -> float:
+DISPARITY_SIGMA_PX = 0.5  # the matcher's sub-pixel disparity error
+
+
+def depth_sigma_m(distance_m: float, intrinsics: Intrinsics, baseline_m: float, base_sigma_m: float) -> float:
     """How far the located centre may be off: a floor of ``base_sigma_m`` (the face-to-centre
     offset, the face's size), growing with the square of the distance as stereo depth does."""
-    return float(np.hypot(base_sigma_m, distance_m**2 * disparity_sigma_px / (intrinsics.fx_px * baseline_m)))
+    return float(np.hypot(base_sigma_m, distance_m**2 * DISPARITY_SIGMA_PX / (intrinsics.fx_px * baseline_m)))
 
 
 def _normalised(weight: np.ndarray) -> np.ndarray:

@@ -33,6 +33,12 @@ from offboard.perception.detection.target_model import TargetModel
 from shared.geometry import Intrinsics, RigidTransform
 
 # name -> "module:class"; imported on demand so that the detector modules can import this one.
+# the share of the detected quadrilateral, about its centre, whose disparities place the face
+CORE_FRACTION = 0.5
+# a face no larger in the image than this share of it, in both directions (the near end of the range)
+MAX_FILL = 0.9
+
+
 _REGISTRY = {
     "sift": "offboard.perception.detection.sift:SiftDetector",
     "ncc": "offboard.perception.detection.ncc:NccDetector",
@@ -110,38 +116,37 @@ def make_detector(name: str, model: TargetModel, intrinsics: Intrinsics, **optio
 
 
 def locate_target(detection: Detection, disparity: np.ndarray, intrinsics: Intrinsics, baseline_m: float,
-                  camera_in_world: RigidTransform, *, core_fraction: float = 0.5,
-                  min_valid_px: int = 1) -> np.ndarray | None:
+                  camera_in_world: RigidTransform) -> np.ndarray | None:
     """World position (3,) of the pictured face's centre, or None without valid disparity on it.
 
     The depth is the median of the valid disparities (float px, NaN = invalid) inside the central
-    part of the detected quadrilateral, shrunk by ``core_fraction`` about the face's centre: block
+    part of the detected quadrilateral, shrunk by ``CORE_FRACTION`` about the face's centre: block
     matching fattens the foreground over the face's borders and a slanted face's border pixels may
     belong to the background. The median, not the mean, so that a few mismatches do not move it.
     """
     centre = detection.center_px
-    core = centre + core_fraction * (detection.corners_px - centre)
+    core = centre + CORE_FRACTION * (detection.corners_px - centre)
     mask = np.zeros(disparity.shape[:2], dtype=np.uint8)
     cv2.fillConvexPoly(mask, np.round(core * 16).astype(np.int32), 1, lineType=cv2.LINE_8, shift=4)
     values = disparity[mask.astype(bool)]
     values = values[np.isfinite(values) & (values > 0)]
-    if values.size < max(1, min_valid_px):
+    if values.size == 0:
         return None
     z = intrinsics.fx_px * baseline_m / float(np.median(values))
     return camera_in_world.apply(intrinsics.back_project(centre[0], centre[1], z))
 
 
 def operating_range(model: TargetModel, intrinsics: Intrinsics, *, min_face_px: float,
-                    max_fill: float = 0.9, max_magnification: float = math.inf) -> tuple[float, float]:
+                    max_magnification: float = math.inf) -> tuple[float, float]:
     """(near, far) distances in metres to a fronto-parallel face.
 
-    Near: the face still fits in ``max_fill`` of the image in both directions, and is not magnified
+    Near: the face still fits in ``MAX_FILL`` of the image in both directions, and is not magnified
     more than ``max_magnification`` times the best picture's resolution (no detail left beyond that).
     Far: the face's smaller side is still ``min_face_px`` pixels, what the method needs to work.
     """
     fx_w, fy_h = intrinsics.fx_px * model.face_width_m, intrinsics.fy_px * model.face_height_m
     picture_h, picture_w = max(p.shape[0] for p in model.pictures), max(p.shape[1] for p in model.pictures)
-    near = max(fx_w / (max_fill * intrinsics.width_px), fy_h / (max_fill * intrinsics.height_px),
+    near = max(fx_w / (MAX_FILL * intrinsics.width_px), fy_h / (MAX_FILL * intrinsics.height_px),
                fx_w / (max_magnification * picture_w), fy_h / (max_magnification * picture_h))
     far = min(fx_w, fy_h) / min_face_px
     if not near < far:
