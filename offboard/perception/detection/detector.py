@@ -32,13 +32,12 @@ from offboard.perception.detectability import DetectabilityTable
 from offboard.perception.detection.target_model import TargetModel
 from shared.geometry import Intrinsics, RigidTransform
 
-# name -> "module:class"; imported on demand so that the detector modules can import this one.
 # the share of the detected quadrilateral, about its centre, whose disparities place the face
 CORE_FRACTION = 0.5
 # a face no larger in the image than this share of it, in both directions (the near end of the range)
 MAX_FILL = 0.9
 
-
+# name -> "module:class"; imported on demand so that the detector modules can import this one.
 _REGISTRY = {
     "sift": "offboard.perception.detection.sift:SiftDetector",
     "ncc": "offboard.perception.detection.ncc:NccDetector",
