@@ -65,7 +65,9 @@ def _encode_array(array: np.ndarray, encoding: ArrayEncoding) -> dict[str, Any]:
     array = np.ascontiguousarray(array)
     if str(array.dtype) not in _DTYPES:
         raise TypeError(f"arrays of dtype {array.dtype} cannot travel")
-    if encoding == "png" and str(array.dtype) in _PNG_DTYPES and array.ndim in (2, 3):
+    # PNG holds 1, 3 or 4 channels of a non-empty image, and gives one channel back as 2-D: else raw
+    if (encoding == "png" and str(array.dtype) in _PNG_DTYPES and array.size
+            and (array.ndim == 2 or (array.ndim == 3 and array.shape[2] in (3, 4)))):
         ok, buf = cv2.imencode(".png", array, [cv2.IMWRITE_PNG_COMPRESSION, 1])
         if not ok:
             raise ValueError("PNG encoding failed")

@@ -180,6 +180,17 @@ def test_a_png_whose_header_disagrees_with_the_shape_is_refused_before_it_is_dec
     assert err.value.field == "left.data" and not decoded
 
 
+@pytest.mark.parametrize("shape", [(4, 5), (4, 5, 1), (4, 5, 2), (4, 5, 3), (4, 5, 4), (0, 5, 3), (4, 5, 3, 1)])
+def test_every_array_asked_to_travel_as_png_comes_back_as_it_was(shape):
+    """One channel came back from PNG as 2-D and was refused; two channels or an empty image raised a
+    bare cv2.error. Those travel raw now."""
+    from shared.codec import _decode_array, _encode_array
+
+    array = np.arange(math.prod(shape), dtype=np.uint8).reshape(shape)
+    back = _decode_array(_encode_array(array, "png"), "x")
+    assert back.shape == array.shape and np.array_equal(back, array)
+
+
 def test_a_robot_that_says_capture_takes_no_time_is_refused():
     """A look of 0 s would be worth infinitely much a second: the planner took it again and again."""
     envelope = msgpack.unpackb(encode(m.Info("c14", "syt", "sim", BaseLimits(), PanTiltLimits(), CameraTiming(),
