@@ -37,7 +37,7 @@ def visible_depth(disparity: np.ndarray | None, occupancy: OccupancyGrid, camera
     """z-depth (m) up to which each ``block_px`` block of the image was seen: the stereo median
     where the block has disparities, else the occupancy map's first occupied cube along its ray."""
     k = intrinsics
-    rows, cols = -(-k.height_px // block_px), -(-k.width_px // block_px)
+    rows, cols = _block_shape(k, block_px)
     v = (np.arange(rows) + 0.5) * block_px - 0.5
     u = (np.arange(cols) + 0.5) * block_px - 0.5
     uu, vv = np.meshgrid(u, v)
@@ -57,6 +57,11 @@ def visible_depth(disparity: np.ndarray | None, occupancy: OccupancyGrid, camera
     return depth.astype(np.float32)
 
 
+def _block_shape(intrinsics: Intrinsics, block_px: int) -> tuple[int, int]:
+    """(rows, columns) of ``block_px`` blocks covering the image, the last ones partly outside it."""
+    return -(-intrinsics.height_px // block_px), -(-intrinsics.width_px // block_px)
+
+
 def look_footprint(grid: VoxelGrid, camera_in_world: RigidTransform, intrinsics: Intrinsics,
                    depth_z: np.ndarray, block_px: int, table: DetectabilityTable,
                    facing_azimuths_rad: np.ndarray, behind_surface_m: float) -> LookFootprint:
@@ -67,7 +72,7 @@ def look_footprint(grid: VoxelGrid, camera_in_world: RigidTransform, intrinsics:
     """
     near, far = table.range_m
     k = intrinsics
-    blocks = (-(-k.height_px // block_px), -(-k.width_px // block_px))
+    blocks = _block_shape(k, block_px)
     if np.shape(depth_z) != blocks:  # the kernel reads it by block without bounds checks
         raise ValueError(f"depth_z must hold one depth per {block_px}-pixel block, shape {blocks}, "
                          f"not {np.shape(depth_z)}")

@@ -371,8 +371,8 @@ def test_an_observation_leaving_nothing_is_refused_though_the_running_total_drif
 
 
 @pytest.mark.parametrize("factors, match", [(np.full(GRID.shape, 1e39), "overflow"),
-                                            (np.zeros(GRID.shape), "zero"),
-                                            (np.full(GRID.shape, 1e-50), "zero")])
+                                            (np.zeros(GRID.shape), "zero .in float32. on every cube"),
+                                            (np.full(GRID.shape, 1e-50), "zero .in float32. on every cube")])
 def test_reweighting_that_would_overflow_or_empty_the_room_is_refused(factors, match):
     """A finite factor past float32's range made every mass NaN; all-zero factors moved p(c_out) to 1."""
     belief = TargetBelief(GRID, facing_sectors=2)
