@@ -11,8 +11,8 @@ numbers whichever worker runs it, in whatever order) and runs :func:`offboard.se
 with a fresh planner; a run that fails gets the worker a fresh agent. Every finished run appends a
 row to ``results.csv`` at once, so an interrupted sweep resumes where it stopped (rows are keyed by
 the run; failed runs are tried again; ``sweep.json`` holds the settings they ran with, and a sweep with
-other settings is refused that folder). Logs: ``runs/<run>/search.log`` per run,
-``workers/worker-<k>/{worker,onboard}.log`` per worker.
+other settings, or with other bytes of a world, its picture or a detectability table, is refused that
+folder). Logs: ``runs/<run>/search.log`` per run, ``workers/worker-<k>/{worker,onboard}.log`` per worker.
 
 The harness is the experimenter: it reads the world file (:mod:`offboard.experiments.world_facts`; offboard
 code never imports the simulator) to place the robot and the target, to write the ``tables`` prior,
@@ -38,6 +38,7 @@ import sys
 import threading
 import time
 import tomllib
+from importlib import resources
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field, replace
@@ -445,6 +446,7 @@ def _execute(run: Run, prepared: dict, settings: SweepSettings, workers: _Worker
 
 SETTINGS_FILE = "sweep.json"  # in --out: the settings its rows ran with, beside results.csv
 CODE_KEY = "code"  # in sweep.json: every version of the code its rows ran on, oldest first
+INPUTS_KEY = "inputs"  # in sweep.json: digests of the world files, pictures and tables its rows ran with
 
 
 def run_settings(settings: SweepSettings) -> dict:
@@ -453,6 +455,32 @@ def run_settings(settings: SweepSettings) -> dict:
     config = load_config(SearchConfig, settings.config_path)
     return json.loads(json.dumps({"search": asdict(config), "move_threshold": settings.move_threshold,
                                   "budget_s": settings.budget_s}, default=str))
+
+
+def run_inputs(prepared: dict[str, tuple[WorldFacts, Path, Path]]) -> dict:
+    """What a run's numbers depend on besides the code and the settings: the bytes of each prepared
+    world's file and of the target picture its planner reads, and of the detectability tables the
+    planner ships. An edited world or a re-measured table under the same name would otherwise resume
+    into a folder of rows made with the old ones."""
+    worlds = {name: hashlib.sha1(world.path.read_bytes() + picture.read_bytes()).hexdigest()[:16]
+              for name, (world, picture, _) in sorted(prepared.items())}
+    tables = resources.files("offboard.perception.detection") / "tables"
+    return {"worlds": worlds, "tables": {f.name: hashlib.sha1(f.read_bytes()).hexdigest()[:16]
+                                         for f in sorted(tables.iterdir(), key=lambda f: f.name)
+                                         if f.name.endswith(".json")}}
+
+
+def _checked_inputs(recorded: dict, prepared: dict[str, tuple[WorldFacts, Path, Path]], out: Path) -> dict:
+    """The inputs to record (those held, updated with this sweep's); refuses (:class:`SweepRefused`)
+    inputs the folder holds with other bytes. Only the worlds with runs to do are compared: a world
+    whose runs are all done mixes nothing."""
+    held, now = recorded.get(INPUTS_KEY, {}), run_inputs(prepared)
+    changed = [f"{kind[:-1]} {name}: {held[kind][name]} there, {digest} now"
+               for kind in ("worlds", "tables") for name, digest in now[kind].items()
+               if name in held.get(kind, {}) and held[kind][name] != digest]
+    if changed:
+        raise SweepRefused(f"{out} holds runs made with other inputs ({'; '.join(changed)}): use another --out")
+    return {"worlds": {**held.get("worlds", {}), **now["worlds"]}, "tables": now["tables"]}
 
 
 def _flat(tree: dict, prefix: str = "") -> dict[str, object]:
@@ -468,7 +496,7 @@ def _checked_settings(settings: SweepSettings) -> dict:
     is recorded too, each version its rows ran on, with a warning when it changed (a commit of docs
     changes no figure, so that is not refused)."""
     path, now, current = settings.out / SETTINGS_FILE, run_settings(settings), code_version()
-    codes = []
+    codes, held = [], {}
     if path.is_file():
         try:
             recorded = json.loads(path.read_text())
@@ -478,6 +506,9 @@ def _checked_settings(settings: SweepSettings) -> dict:
             raise SweepRefused(f"{path} is not the settings file this harness writes (not a JSON object): "
                                "use another --out")
         codes = recorded.pop(CODE_KEY, [])
+        held = recorded.pop(INPUTS_KEY, {})  # compared once the worlds are prepared (_checked_inputs)
+        if not held:
+            log.warning("%s records no inputs (it is older than that record): its runs are taken to have these", path)
         before, after = _flat(recorded), _flat(now)
         differ = [f"{k} {before.get(k)!r} there, {after.get(k)!r} now" for k in sorted(before.keys() | after.keys())
                   if before.get(k) != after.get(k)]
@@ -489,7 +520,7 @@ def _checked_settings(settings: SweepSettings) -> dict:
             log.warning("%s: its rows ran on code %s; this sweep runs %s", settings.out, ", ".join(others), current)
     elif (settings.out / "results.csv").is_file():
         log.warning("%s has no %s: its runs are taken to have these settings", settings.out, SETTINGS_FILE)
-    return {**now, CODE_KEY: codes if current in codes else [*codes, current]}
+    return {**now, INPUTS_KEY: held, CODE_KEY: codes if current in codes else [*codes, current]}
 
 
 def code_version() -> str:
@@ -514,6 +545,7 @@ def sweep(runs: list[Run], settings: SweepSettings, on_progress: Callable[[Progr
     todo = [r for r in runs if r.key not in done]
     progress = Progress(total=len(runs), skipped=len(runs) - len(todo))
     prepared = _prepare(todo, settings.out)
+    recorded[INPUTS_KEY] = _checked_inputs(recorded, prepared, settings.out)
     if todo:  # only now, and only with runs to do: the folder is bound to settings and code its runs have
         written = settings.out / (SETTINGS_FILE + ".new")
         written.write_text(json.dumps(recorded, indent=2) + "\n")

@@ -224,6 +224,25 @@ def test_a_sweep_records_each_version_of_the_code_its_rows_ran_on(tmp_path, monk
     assert "its rows ran on code v2-dirty; this sweep runs v1" in caplog.text
 
 
+def test_a_sweep_does_not_resume_with_a_world_whose_file_changed_since_its_runs(tmp_path, monkeypatch):
+    """The settings were compared, the inputs were not: an edited world (or re-measured table) under the
+    same name resumed into rows made with the old one."""
+    world_file = tmp_path / "room.toml"
+    world_file.write_text(SMALL_ROOM.format(name="room", height=2.5, position="[1.5, 3.5, 0.0]", furniture=""))
+    world = load_facts(str(world_file))
+    runs = [Run("syt", str(world_file), world.start, world.target, 3, "uniform", seed) for seed in (0, 1)]
+    monkeypatch.setattr(experiment, "_execute", lambda run, *_: make_row(run, world, SUMMARY, 1.0))
+    out = tmp_path / "out"
+    experiment.sweep(runs[:1], experiment.SweepSettings(out, jobs=1))
+    inputs = json.loads((out / experiment.SETTINGS_FILE).read_text())["inputs"]
+    assert set(inputs["worlds"]) == {str(world_file)} and {"sift.json", "ncc.json"} <= set(inputs["tables"])
+    world_file.write_text(world_file.read_text().replace("max = [3.5, 0.5, 0.5]", "max = [3.5, 0.5, 0.6]"))
+    with pytest.raises(experiment.SweepRefused, match=f"other inputs \\(world {world_file}: "):
+        experiment.sweep(runs, experiment.SweepSettings(out, jobs=1))
+    assert len(load_results(out / "results.csv")) == 1
+    assert experiment.sweep(runs, experiment.SweepSettings(tmp_path / "fresh", jobs=1)).done == 2
+
+
 def test_the_code_version_is_the_checkouts():
     checkout = Path(experiment.__file__).resolve().parents[2]
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=checkout, capture_output=True, text=True)
