@@ -232,7 +232,9 @@ def viewpoint(truth: Truth, start_xy: tuple[float, float], criteria: SeeingCrite
               margin_m: float = 0.0, avoid: tuple[tuple[float, float], ...] = (),
               avoid_m: float = 0.0) -> tuple[tuple[float, float] | None, float]:
     """The seeing position closest to ``start_xy`` along collision-free paths, and that path's length
-    (``None, inf`` if none is reachable; ``start_xy, 0`` if the start's own cell sees it). With
+    (``None, inf`` if none is reachable; ``start_xy, 0`` if the start's own cell sees it). Paths are
+    any-angle (:func:`~offboard.navigation.grid_planner.any_angle_field`): the robot straightens its
+    own, so grid steps (up to 8 % longer) would set SPL's yardstick past what it can drive. With
     ``margin_m``, only positions whose every free neighbour within that distance sees the target too:
     a robot that stops a little off still sees it.
     Positions within ``avoid_m`` of a point of ``avoid`` (viewpoints already tried) do not count."""
@@ -250,7 +252,7 @@ def viewpoint(truth: Truth, start_xy: tuple[float, float], criteria: SeeingCrite
     if seen[grid_planner.cell_of(floor, start_xy)]:
         # the start's own cell sees it: the robot needs no drive at all (not the few mm to the cell's centre)
         return start_xy, 0.0
-    field_m = grid_planner.distance_field(floor, start_xy)
+    field_m = grid_planner.any_angle_field(floor, start_xy)
     cost = np.where(seen, field_m, np.inf)
     best = np.unravel_index(int(np.argmin(cost)), cost.shape)
     if not math.isfinite(cost[best]):

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from offboard.navigation.grid_planner import (distance_field, nearest_free_cell, path_length_m, path_lengths, segment_is_free,
+from offboard.navigation.grid_planner import (any_angle_field, distance_field, nearest_free_cell, path_length_m, path_lengths, segment_is_free,
                                    shortest_path)
 from offboard.perception.occupancy import FloorMap
 from conftest import RES, floor_map
@@ -42,6 +42,41 @@ def test_distance_field_goes_round_walls_and_marks_enclosures_unreachable():
     detour = math.dist((1.0, 1.0), (4.5, 3.5)) + math.dist((4.5, 3.5), (8.0, 1.0))
     assert detour <= behind <= detour * 1.09  # 8-connected paths are at most ~8 % long
     assert pen == math.inf and outside == math.inf
+
+
+def test_the_any_angle_field_is_the_straight_distance_in_the_open():
+    """SPL's yardstick: the 8-connected field reads a line 22.5° off an axis 8 % long."""
+    start = (0.51, 0.32)
+    field = any_angle_field(floor_map(np.zeros((120, 90), bool)), start)
+    x, y = (np.indices((120, 90)) + 0.5) * RES
+    assert np.allclose(field, np.hypot(x - start[0], y - start[1]), rtol=0, atol=1e-9)
+
+
+def test_the_any_angle_field_goes_round_walls_as_straightened_paths_do():
+    fmap = wall_map()
+    field, grid = any_angle_field(fmap, (1.0, 1.0)), distance_field(fmap, (1.0, 1.0))
+    assert np.array_equal(np.isfinite(field), np.isfinite(grid))  # the same cells reachable
+    assert np.all(field[np.isfinite(grid)] <= grid[np.isfinite(grid)] + 1e-9)
+    behind = field[int(8.0 / RES), int(1.0 / RES)]
+    detour = math.dist((1.0, 1.0), (4.5, 3.5)) + math.dist((4.5, 3.5), (8.025, 1.025))
+    assert detour <= behind <= detour * 1.01  # bends at cell centres beside the wall's end
+    assert behind <= path_length_m(shortest_path(fmap, (1.0, 1.0), (8.025, 1.025))) + 1e-9
+    blocked_start = any_angle_field(fmap, (4.5, 1.0))  # inside the wall: hops out first, as the grid field does
+    assert np.array_equal(np.isfinite(blocked_start), np.isfinite(distance_field(fmap, (4.5, 1.0))))
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), start=st.tuples(st.floats(0.1, 2.9), st.floats(0.1, 1.9)))
+def test_the_any_angle_field_is_never_longer_than_the_grid_s_on_random_maps(seed, start):
+    rng = np.random.default_rng(seed)
+    occupied = rng.random((60, 40)) < 0.05
+    fmap = floor_map(cv2.dilate(occupied.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool))
+    field, grid = any_angle_field(fmap, start), distance_field(fmap, start)
+    assert np.array_equal(np.isfinite(field), np.isfinite(grid))
+    reach = np.isfinite(grid)
+    assert np.all(field[reach] <= grid[reach] + 1e-9)
+    x, y = (np.indices(fmap.blocked.shape) + 0.5) * RES
+    assert np.all(field[reach] >= np.hypot(x - start[0], y - start[1])[reach] - 1e-9)
 
 
 def test_blocked_start_starts_from_the_nearest_free_cell():
