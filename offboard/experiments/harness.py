@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import csv
 import hashlib
 import itertools
 import json
@@ -49,7 +50,7 @@ import numpy as np
 
 from offboard.experiments.baselines import BASELINES, BaselineContext
 from offboard.experiments.calibration import LOOKS_FILE
-from offboard.experiments.report import append_row, finished_keys, write_report
+from offboard.experiments.report import COLUMNS, append_row, finished_keys, load_results, write_report
 from offboard.experiments.world_facts import (Placement, Start, WorldFacts, load_facts, robot_starts, simulator_refuses,
                                               tables_hints, target_placements, viewpoint)
 from offboard.search.loop import Search, SearchConfig
@@ -146,9 +147,52 @@ def make_row(run: Run, world: WorldFacts, summary: dict | None, run_wall_s: floa
     estimate = summary.get("target_estimate_m")
     err = float(np.linalg.norm(np.array(estimate) - truth.target_center_m)) if summary["found"] and estimate else None
     success = err is not None and err <= SUCCESS_RADIUS_M
-    longest = max(float(summary["distance_m"]), shortest) if math.isfinite(shortest) else 0.0
-    spl = (shortest / longest if longest > 0 else 1.0) if success and math.isfinite(shortest) else 0.0
-    return {**row, "estimate_error_m": "" if err is None else round(err, 3), "success": success, "spl": round(spl, 4)}
+    return {**row, "estimate_error_m": "" if err is None else round(err, 3), "success": success,
+            "spl": spl(success, shortest, float(summary["distance_m"]))}
+
+
+def spl(success: bool, shortest_m: float, distance_m: float) -> float:
+    """Success weighted by path length: S·ℓ/max(p, ℓ), ℓ the shortest path, p the distance driven (0
+    where ``shortest_m`` is inf: no position the robot can reach sees the target)."""
+    if not success or not math.isfinite(shortest_m):
+        return 0.0
+    longest = max(distance_m, shortest_m)
+    return round(shortest_m / longest if longest > 0 else 1.0, 4)
+
+
+def rescore(out: Path) -> int:
+    """Make each row of ``out/results.csv`` again with this code's yardstick: its shortest path (from
+    its run's ``spec.json``: the world file, start and target) and SPL; nothing the run measured
+    changes. For rows made before the yardstick changed, so that they can be read beside new ones.
+    Returns the rows whose SPL changed; the file is replaced whole, or not at all."""
+    results = out / "results.csv"
+    load_results(results, latest=False)  # refuse a malformed file before touching it, naming the line
+    with results.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    worlds: dict[str, WorldFacts] = {}
+    changed = 0
+    for line, row in enumerate(rows, start=2):
+        spec_file = out / row["run_dir"] / "spec.json"
+        try:
+            spec = json.loads(spec_file.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{results}:{line}: its run's {spec_file} cannot be read ({exc})") from None
+        if spec["world_path"] not in worlds:
+            worlds[spec["world_path"]] = load_facts(spec["world_path"])
+        world = worlds[spec["world_path"]]
+        _, shortest = viewpoint(world.truth(tuple(spec["run"]["target"])), tuple(spec["run"]["start"][:2]))
+        score = spl(row["success"] == "True", shortest, float(row["distance_m"] or 0.0))
+        changed += score != float(row["spl"])
+        row.update(shortest_path_m=round(shortest, 3) if math.isfinite(shortest) else "", spl=score)
+    written = results.with_name(results.name + ".new")
+    with written.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+        f.flush()
+        os.fsync(f.fileno())
+    written.replace(results)
+    return changed
 
 
 # --- the workers: long-lived processes, each with its own simulated robot -------------------------
@@ -630,6 +674,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--run-timeout-s", type=number("--run-timeout-s", 1.0, 1e7), default=3600.0, metavar="SECONDS",
                         help="wall clock per run")
     parser.add_argument("--report-only", action="store_true", help="rewrite report.md and the plots from results.csv")
+    parser.add_argument("--rescore", action="store_true",
+                        help="make results.csv's shortest paths and SPL again with this code's yardstick (for rows "
+                             "made before it changed), then rewrite the report; runs nothing")
 
 
 def grid_from_args(args: argparse.Namespace) -> GridSpec:
@@ -659,7 +706,13 @@ def _interrupt(signum: int, frame: object) -> None:
 
 def main(args: argparse.Namespace) -> int:
     failed, sweep_figures = 0, None
-    if not args.report_only:
+    if args.rescore and (args.out / "results.csv").is_file():
+        try:
+            log.info("%s: SPL changed in %d rows", args.out / "results.csv", rescore(args.out))
+        except (ValueError, KeyError, OSError) as exc:
+            log.error("cannot rescore %s: %s", args.out, exc)
+            return 2
+    elif not args.report_only:
         try:
             runs = build_runs(grid_from_args(args))
             if args.config:

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import math
 import os
 import subprocess
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
 import cv2
@@ -241,6 +243,32 @@ def test_a_sweep_does_not_resume_with_a_world_whose_file_changed_since_its_runs(
         experiment.sweep(runs, experiment.SweepSettings(out, jobs=1))
     assert len(load_results(out / "results.csv")) == 1
     assert experiment.sweep(runs, experiment.SweepSettings(tmp_path / "fresh", jobs=1)).done == 2
+
+
+def test_rescore_makes_the_shortest_paths_and_spl_again_and_nothing_else(tmp_path, caplog):
+    """Rows made before a yardstick's change (session 64's any-angle paths) could not be read beside
+    new ones without running them again."""
+    caplog.set_level(logging.INFO)
+    world = load_facts("paper-lab")
+    runs = [r for r in build_runs(PAPER) if r.cost == 3][:2]
+    results, rows = tmp_path / "results.csv", []
+    for run in runs:
+        (tmp_path / "runs" / run.slug).mkdir(parents=True)
+        (tmp_path / "runs" / run.slug / "spec.json").write_text(json.dumps({"run": asdict(run),
+                                                                             "world_path": str(world.path)}))
+        row = make_row(run, world, SUMMARY, 1.0)
+        rows.append(row)
+        append_row(results, {**row, "shortest_path_m": round(row["shortest_path_m"] * 1.05, 3), "spl": 0.99})
+    assert experiment.main(experiment_args("--rescore", "--out", str(tmp_path))) == 0
+    again = load_results(results)
+    assert [r["spl"] for r in again] == [r["spl"] for r in rows] and rows[0]["spl"] != 0.99
+    assert [r["shortest_path_m"] for r in again] == [r["shortest_path_m"] for r in rows]
+    assert [r["robot_time_s"] for r in again] == [SUMMARY["robot_time_s"]] * 2  # what the run measured stays
+    assert "SPL changed in 2 rows" in caplog.text and (tmp_path / "report.md").is_file()
+    (tmp_path / "runs" / runs[1].slug / "spec.json").unlink()
+    before = results.read_text()
+    assert experiment.main(experiment_args("--rescore", "--out", str(tmp_path))) == 2
+    assert f"results.csv:3: its run's" in caplog.text and results.read_text() == before  # nothing lost
 
 
 def test_the_code_version_is_the_checkouts():
