@@ -90,6 +90,8 @@ def parse_look(text: str, where: str = "look") -> Look:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{where}: not JSON ({exc.msg})") from None
+    except RecursionError:  # nested past Python's stack: no look is
+        raise ValueError(f"{where}: not a look (nested too deep)") from None
     if not isinstance(data, dict):
         raise ValueError(f"{where}: expected an object, got {type(data).__name__}")
     values = {}
@@ -124,7 +126,10 @@ def read_looks(path: Path) -> list[Look]:
     path = Path(path)
     if not path.is_file():
         return []
-    lines = path.read_text().splitlines()
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not text (byte {exc.start} is not UTF-8)") from None
     return [parse_look(line, f"{path}:{n}") for n, line in enumerate(lines, 1) if line.strip()]
 
 

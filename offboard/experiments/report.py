@@ -118,12 +118,18 @@ def append_row(results: Path, row: dict) -> None:
         os.fsync(f.fileno())
 
 
-def _number(text: str) -> float | None:
+def _measured(text: str, column: str, where: str) -> float | None:
+    """A number column's value; None where empty (not measured); a ValueError naming the cell where it
+    is neither: coerced to None, a typo read as "not measured" and moved the means silently."""
+    if text == "":
+        return None
     try:
         value = float(text)
-    except (TypeError, ValueError):
-        return None
-    return value if math.isfinite(value) else None
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise ValueError(f"{where}: {column} {text!r}, not a finite number")
+    return value
 
 
 # the columns every results.csv has had; those added later are empty in an older file
@@ -136,10 +142,14 @@ def load_results(path: Path, latest: bool = True) -> list[dict]:
     writes."""
     with Path(path).open(newline="") as f:
         reader = csv.DictReader(f)
-        missing = [c for c in REQUIRED_COLUMNS if c not in (reader.fieldnames or ())]
-        if missing:
-            raise ValueError(f"{path}: not an experiment's results.csv: no column {', '.join(missing)}")
-        rows = [_parsed(row, f"{path}:{reader.line_num}") for row in reader]
+        try:
+            missing = [c for c in REQUIRED_COLUMNS if c not in (reader.fieldnames or ())]
+            if missing:
+                raise ValueError(f"{path}: not an experiment's results.csv: no column {', '.join(missing)}")
+            rows = [_parsed(row, f"{path}:{reader.line_num}") for row in reader]
+        except (csv.Error, UnicodeDecodeError) as exc:  # a field past csv's limit, bytes that are not text
+            raise ValueError(f"{path}: the row after line {reader.line_num} is not one this harness writes "
+                             f"({exc})") from None
     return list({r["key"]: r for r in rows}.values()) if latest else rows
 
 
@@ -152,8 +162,14 @@ def _parsed(row: dict, where: str) -> dict:
     allowed = tuple(map(str, COSTS)) if row["method"] == "syt" else ("",)  # the cost function is SYT's
     if row["cost"] not in allowed:
         raise ValueError(f"{where}: cost {row['cost']!r} for method {row['method']!r}, not one of {allowed}")
+    for flag in ("found", "success"):
+        if row[flag] not in ("True", "False"):
+            raise ValueError(f"{where}: {flag} {row[flag]!r}, not True or False")
     parsed = {**dict.fromkeys(TIME_COLUMNS + GLANCE_COLUMNS),
-              **{k: v if k in TEXT_COLUMNS else _number(v) for k, v in row.items()}}
+              **{k: v if k in TEXT_COLUMNS else _measured(v, k, where) for k, v in row.items()
+                 if k not in ("found", "success", "cost")}}
+    if parsed["spl"] is not None and not 0.0 <= parsed["spl"] <= 1.0:
+        raise ValueError(f"{where}: spl {row['spl']!r}, not in [0, 1]")
     parsed.update(found=row["found"] == "True", success=row["success"] == "True",
                   cost=int(row["cost"]) if row["cost"] else None)
     return {**parsed, **_times(parsed)}
@@ -540,7 +556,8 @@ def _stats_md(stats: list[MethodStats], first: str = "Method", latency: bool = T
     shortest path, their number in brackets), looks and glances, distance, motion, processing and their sum."""
     heads = [first, "Runs", "Success", "SPL"] + ["SPL, finite shortest path (runs)"] * finite
     heads += ["Looks", "Glances", "Distance (m)", "Motion (min)", "Processing (min)", "Motion + processing (min)"]
-    heads += ["Planning p50 / p95 (ms)"] * latency + ["Worlds; seeds"] * scoped
+    heads += ["Planning p50 / p95 (ms): the median run's p50, the 95th percentile of the runs' p95"] * latency
+    heads += ["Worlds; seeds"] * scoped
     lines = ["| " + " | ".join(heads) + " |", "|---" * len(heads) + "|"]
     for s in stats:
         rate = "—" if s.success_rate is None else f"{100 * s.success_rate:.1f}%"
@@ -640,7 +657,7 @@ def _gains_md(rows: list[dict]) -> list[str]:
 
 
 def _time_md(rows: list[dict]) -> list[str]:
-    ok = [r for r in rows if r["success"]]
+    ok = [r for r in rows if r["success"] and r["method"] == "syt"]  # set against the report's SYT
     measured = [r for r in ok if r["processing_min"] is not None]
     lines = ["## Time: motion and processing", "",
              "Motion is the robot's clock (driving, turning, slewing the head, capturing). Processing is the measured "
@@ -649,11 +666,11 @@ def _time_md(rows: list[dict]) -> list[str]:
              f"about {REPORT_PROCESSING_S:g} s of processing per action, so only motion + processing compares like "
              "with like; Tables 2 and 3 show that sum."]
     if len(measured) < len(ok):
-        lines[-1] += (f" **{len(ok) - len(measured)} of {len(ok)} successful runs did not measure processing**: their "
+        lines[-1] += (f" **{len(ok) - len(measured)} of {len(ok)} successful SYT runs did not measure processing**: their "
                       "time is motion only and understates the report's kind of minutes.")
     per_action = mean_of([60 * r["processing_min"] / r["actions"] for r in measured if r["actions"]])
     if per_action is not None:
-        lines[-1] += (f" Ours: {per_action:.1f} s of processing per action (mean over {len(measured)} successful runs; "
+        lines[-1] += (f" Ours: {per_action:.1f} s of processing per action (mean over {len(measured)} successful SYT runs; "
                       f"{scope(measured)}).")
     return lines + [""]
 
@@ -768,7 +785,7 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
               f"SYT success rate, all its runs pooled: **{'—' if rate is None else f'{100 * rate:.1f}%'}** "
               f"(report: {100 * REPORT_SUCCESS:.0f}%). "
               "SPL: success × shortest path / max(driven, shortest path), the shortest path being the collision-free "
-              "path on the true floor map to the closest position from which the detector's measured table gives a "
+              "any-angle path on the true floor map to the closest position from which the detector's measured table gives a "
               "rate ≥ 0.8, with the camera aimed within its tilt limits, the whole picture in the image and nothing "
               "across the lines to its centre and its corners drawn in by a tenth."]
     unseen = any(r["shortest_path_m"] is None for r in rows)

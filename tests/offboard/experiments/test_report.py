@@ -245,8 +245,17 @@ def test_processing_not_measured_is_said_and_not_summed(tmp_path):
     _row(results, "syt", "office", "uniform", 1, None, None)
     write_report(results, tmp_path)
     text = (tmp_path / "report.md").read_text()
-    assert "**1 of 2 successful runs did not measure processing**" in text
+    assert "**1 of 2 successful SYT runs did not measure processing**" in text
     assert "| SYT cost 3, uniform | 2 | 100.0% | " in text and "| — | — |" in text  # no partial means
+
+
+def test_the_processing_set_against_the_report_s_is_syt_s_alone(tmp_path):
+    """The baselines' runs were averaged into "Ours", beside the report's 15 s for its SYT."""
+    results = tmp_path / "results.csv"
+    _row(results, "syt", "office", "uniform", 0, 100.0, 30.0)  # 6 actions: 5 s each
+    _row(results, "exhaustive", "office", "uniform", 0, 100.0, 90.0)
+    write_report(results, tmp_path)
+    assert "Ours: 5.0 s of processing per action (mean over 1 successful SYT runs" in (tmp_path / "report.md").read_text()
 
 
 def test_priors_are_shown_side_by_side(tmp_path):
@@ -336,6 +345,7 @@ def test_bin_edges_belong_to_the_upper_bin_and_one_to_the_last():
      '"x_m": 1.0, "y_m": 2.0, "true_x_m": 1.0, "true_y_m": 2.0, "true_heading_deg": 0}', "heading_deg"),
     ("[1, 2]", "expected an object"),
     ("{not json", "not JSON"),
+    ("[" * 100_000 + "]" * 100_000, "nested too deep"),  # a bare RecursionError before
 ])
 def test_a_malformed_look_is_refused_naming_the_line_and_field(tmp_path, text, named):
     path = tmp_path / LOOKS_FILE
@@ -344,6 +354,13 @@ def test_a_malformed_look_is_refused_naming_the_line_and_field(tmp_path, text, n
         read_looks(path)
     assert parse_look(json.dumps(_look(0.1, 0.05, True))).detected is True
     assert read_looks(tmp_path / "absent.jsonl") == []
+
+
+def test_a_look_log_that_is_not_text_is_refused_naming_it(tmp_path):
+    path = tmp_path / LOOKS_FILE
+    path.write_bytes(json.dumps(_look(0.1, 0.1)).encode() + b"\n\xff\xfe\n")
+    with pytest.raises(ValueError, match=f"{LOOKS_FILE}: not text"):  # a bare UnicodeDecodeError before
+        read_looks(path)
 
 
 def test_the_report_sums_up_how_far_the_believed_pose_was_from_the_true_one_at_the_looks(tmp_path):
@@ -466,6 +483,12 @@ def test_a_header_cut_short_or_never_written_leaves_a_folder_that_resumes(tmp_pa
     (lambda text: text.replace("\n", ",extra\n", 2).replace(",extra", "", 1), f"results.csv:2: {len(COLUMNS) + 1} fields where the header has {len(COLUMNS)}"),
     (lambda text: text.replace(",3,uniform,", ",three,uniform,", 1), "results.csv:2: cost 'three' for method 'syt'"),
     (lambda text: text.replace(",3,uniform,", ",,uniform,", 1), "results.csv:2: cost '' for method 'syt'"),
+    # these were read as "not measured", or a failure, and moved the means silently
+    (lambda text: text.replace(",True,found,6,", ",True,found,six,", 1), "results.csv:2: actions 'six', not a finite number"),
+    (lambda text: text.replace(",True,found,6,", ",True,found,nan,", 1), "results.csv:2: actions 'nan', not a finite number"),
+    (lambda text: text.replace(",True,found,6,", ",yes,found,6,", 1), "results.csv:2: found 'yes', not True or False"),
+    (lambda text: text.replace(",True,0.4773,", ",True,2.5,", 1), "results.csv:2: spl '2.5', not in [0, 1]"),
+    (lambda text: text.replace(",True,0.4773,", "," + "x" * 140_000 + ",0.4773,", 1), "results.csv: the row after line 1 is not one"),
 ])
 def test_a_malformed_results_file_is_refused_naming_the_line_and_kept(tmp_path, caplog, edit, problem):
     results = tmp_path / "results.csv"
