@@ -162,7 +162,7 @@ def spl(success: bool, shortest_m: float, distance_m: float) -> float:
 
 def rescore(out: Path) -> int:
     """Make each row of ``out/results.csv`` again with this code's yardstick: its shortest path (from
-    its run's ``spec.json``: the world file, start and target) and SPL; nothing the run measured
+    its run's ``spec.json``: the world, start and target) and SPL; nothing the run measured
     changes. For rows made before the yardstick changed, so that they can be read beside new ones.
     Returns the rows whose SPL changed; the file is replaced whole, or not at all."""
     results = out / "results.csv"
@@ -177,9 +177,10 @@ def rescore(out: Path) -> int:
             spec = json.loads(spec_file.read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise ValueError(f"{results}:{line}: its run's {spec_file} cannot be read ({exc})") from None
-        if spec["world_path"] not in worlds:
-            worlds[spec["world_path"]] = load_facts(spec["world_path"])
-        world = worlds[spec["world_path"]]
+        name = spec["run"]["world"]  # a bundled name or a path, as the sweep was given it
+        if name not in worlds:
+            worlds[name] = load_facts(name)
+        world = worlds[name]
         _, shortest = viewpoint(world.truth(tuple(spec["run"]["target"])), tuple(spec["run"]["start"][:2]))
         score = spl(row["success"] == "True", shortest, float(row["distance_m"] or 0.0))
         changed += score != float(row["spl"])

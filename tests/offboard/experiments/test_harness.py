@@ -254,8 +254,7 @@ def test_rescore_makes_the_shortest_paths_and_spl_again_and_nothing_else(tmp_pat
     results, rows = tmp_path / "results.csv", []
     for run in runs:
         (tmp_path / "runs" / run.slug).mkdir(parents=True)
-        (tmp_path / "runs" / run.slug / "spec.json").write_text(json.dumps({"run": asdict(run),
-                                                                             "world_path": str(world.path)}))
+        (tmp_path / "runs" / run.slug / "spec.json").write_text(json.dumps({"run": asdict(run)}))
         row = make_row(run, world, SUMMARY, 1.0)
         rows.append(row)
         append_row(results, {**row, "shortest_path_m": round(row["shortest_path_m"] * 1.05, 3), "spl": 0.99})
