@@ -256,7 +256,7 @@ def _theta_field(blocked, si, sj, sx, sy, start_cost, dist):
             if a < 0 or a >= nx or b < 0 or b >= ny or blocked[a, b] or done[a, b]:
                 continue
             if di != 0 and dj != 0 and (blocked[i + di, j] or blocked[i, j + dj]):
-                continue
+                continue  # _dijkstra's rules, written out: an inlined helper for both made it twice as slow
             cx, cy = a + 0.5, b + 0.5
             if _segment_free(blocked, px, py, cx, cy):  # straight on from the parent
                 cost, qx, qy, qd = pd + math.hypot(cx - px, cy - py), px, py, pd
