@@ -666,12 +666,12 @@ def _time_md(rows: list[dict]) -> list[str]:
              f"about {REPORT_PROCESSING_S:g} s of processing per action, so only motion + processing compares like "
              "with like; Tables 2 and 3 show that sum."]
     if len(measured) < len(ok):
-        lines[-1] += (f" **{len(ok) - len(measured)} of {len(ok)} successful SYT runs did not measure processing**: their "
-                      "time is motion only and understates the report's kind of minutes.")
+        lines[-1] += (f" **{len(ok) - len(measured)} of {len(ok)} successful SYT runs did not measure "
+                      "processing**: their time is motion only and understates the report's kind of minutes.")
     per_action = mean_of([60 * r["processing_min"] / r["actions"] for r in measured if r["actions"]])
     if per_action is not None:
-        lines[-1] += (f" Ours: {per_action:.1f} s of processing per action (mean over {len(measured)} successful SYT runs; "
-                      f"{scope(measured)}).")
+        lines[-1] += (f" Ours: {per_action:.1f} s of processing per action (mean over {len(measured)} "
+                      f"successful SYT runs; {scope(measured)}).")
     return lines + [""]
 
 
@@ -785,8 +785,8 @@ def render(rows: list[dict], sweep: tuple[int, float, int] | None = None, looks:
               f"SYT success rate, all its runs pooled: **{'—' if rate is None else f'{100 * rate:.1f}%'}** "
               f"(report: {100 * REPORT_SUCCESS:.0f}%). "
               "SPL: success × shortest path / max(driven, shortest path), the shortest path being the collision-free "
-              "any-angle path on the true floor map to the closest position from which the detector's measured table gives a "
-              "rate ≥ 0.8, with the camera aimed within its tilt limits, the whole picture in the image and nothing "
+              "any-angle path on the true floor map to the closest position from which the detector's measured "
+              "table gives a rate ≥ 0.8, with the camera aimed within its tilt limits, the whole picture in the image and nothing "
               "across the lines to its centre and its corners drawn in by a tenth."]
     unseen = any(r["shortest_path_m"] is None for r in rows)
     lines[-1] += _unseen_md(rows)

@@ -11,8 +11,8 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from offboard.navigation.grid_planner import (any_angle_field, distance_field, nearest_free_cell, path_length_m, path_lengths, segment_is_free,
-                                   shortest_path)
+from offboard.navigation.grid_planner import (any_angle_field, distance_field, nearest_free_cell, path_length_m,
+                                              path_lengths, segment_is_free, shortest_path)
 from offboard.perception.occupancy import FloorMap
 from conftest import RES, floor_map
 
