@@ -8,8 +8,8 @@ it from. A fresh checkout has none, so each process that searches compiles all t
 
 :func:`compile_kernels` calls every kernel once through the code a search runs, on a small scene in
 the bundled paper lab with the default configuration: a look (stereo into the map, the look's
-footprint, Bayes), a decision, a navigation step (TangentBug, the global path, a scan match) and a
-checkpoint written and read back. Its arguments are then of the types a search passes, so the
+footprint, Bayes), a decision, a navigation step (TangentBug, the global path, a scan match), a
+checkpoint written and read back, and the experimenter's any-angle path lengths (SPL's yardstick). Its arguments are then of the types a search passes, so the
 specialisations it caches are the ones a search loads. ``syt-offboard compile`` runs it, and
 ``make`` once after installing.
 """
@@ -95,6 +95,7 @@ def compile_kernels() -> list[str]:
         _look(scene, disparity)
         _decide(scene)
         _navigate(scene, disparity)
+        _yardstick(scene)
     log.info("numba kernels: %d specialisations compiled, the others loaded from the cache", len(compiled.names))
     for name in sorted(set(compiled.names)):
         log.debug("compiled %s", name)
@@ -155,6 +156,12 @@ def _navigate(scene: _Scene, disparity: np.ndarray) -> None:
     scan = scan_from_disparity(disparity, K, MOUNT, 0.0, math.radians(config.look_tilt_deg), config.match)
     tracker = PoseTracker(scene.pose)
     ScanMatcher(config.match).match(scan, tracker.pose, map_field(scene.occupancy, config.match), tracker.covariance)
+
+
+def _yardstick(scene: _Scene) -> None:
+    """The experimenter's any-angle path lengths, SPL's shortest path and the oracle's viewpoint
+    (:func:`~offboard.experiments.world_facts.viewpoint`): not the search's, but every sweep's."""
+    grid_planner.any_angle_field(_floor(scene), (scene.pose.x_m, scene.pose.y_m))
 
 
 def _floor(scene: _Scene) -> FloorMap:
