@@ -1,17 +1,18 @@
 """Numba's on-disk cache of the offboard kernels, filled before any search needs it.
 
 Numba compiles a kernel lazily, at its first call, for the types of that call's arguments (dtype,
-number of dimensions, layout, whether an array is read-only); with ``cache=True`` it keeps the machine
-code under the module's ``__pycache__`` (or ``NUMBA_CACHE_DIR``), where every later process loads
-it from. A fresh checkout has none, so each process that searches compiles all the kernels of
-``offboard`` first (about half a minute), and the test suite's parallel search processes each pay that again.
+number of dimensions, layout, whether an array is read-only); with ``cache=True`` it keeps the
+machine code under the module's ``__pycache__`` (or ``NUMBA_CACHE_DIR``), where every later process
+loads it from. A fresh checkout has none, so each process that searches compiles all the kernels of
+``offboard`` first (about half a minute), and the test suite's parallel search processes each pay
+that again.
 
 :func:`compile_kernels` calls every kernel once through the code a search runs, on a small scene in
 the bundled paper lab with the default configuration: a look (stereo into the map, the look's
 footprint, Bayes), a decision, a navigation step (TangentBug, the global path, a scan match), a
-checkpoint written and read back, and the experimenter's any-angle path lengths (SPL's yardstick). Its arguments are then of the types a search passes, so the
-specialisations it caches are the ones a search loads. ``syt-offboard compile`` runs it, and
-``make`` once after installing.
+checkpoint written and read back, and the experimenter's any-angle path lengths (SPL's
+yardstick). Its arguments are then of the types a search passes, so the specialisations it caches
+are the ones a search loads. ``syt-offboard compile`` runs it, and ``make`` once after installing.
 """
 
 from __future__ import annotations
